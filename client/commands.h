@@ -1,0 +1,12 @@
+// Subcommands of the objdb command-line client. Each takes the arguments after "objdb"
+// (argv[0] is the subcommand name) and returns the process exit status: 0 success, 1 failure,
+// 2 command-line error.
+#pragma once
+
+namespace objdb {
+
+int runHealthCommand(int argc, char** argv);  // health_command.cpp
+int runSimCommand(int argc, char** argv);     // sim_command.cpp
+int runInfoCommand(int argc, char** argv);    // info_command.cpp
+
+}  // namespace objdb

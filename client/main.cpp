@@ -1,0 +1,40 @@
+// objdb: command-line client of the objdb server. Dispatches to the subcommands in commands.h.
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "client/commands.h"
+
+namespace {
+
+constexpr const char* kUsage = R"(usage: objdb <command> [options]
+
+Command-line client of objdb, the incremental 3D object database.
+
+commands:
+  health   ask a server whether it is serving (grpc.health.v1 Check)
+  sim      render synthetic RGB-D datasets with ground truth (presets or scene files)
+  info     describe dataset folders (objdb or TUM layout): frames, camera, objects
+  help     show this text
+
+Run "objdb <command> --help" for the options of a command.
+)";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::fprintf(stderr, "objdb: no command given\n\n%s", kUsage);
+    return 2;
+  }
+  const std::string command = argv[1];
+  if (command == "help" || command == "--help" || command == "-h") {
+    std::fputs(kUsage, stdout);
+    return 0;
+  }
+  if (command == "health") return objdb::runHealthCommand(argc - 1, argv + 1);
+  if (command == "sim") return objdb::runSimCommand(argc - 1, argv + 1);
+  if (command == "info") return objdb::runInfoCommand(argc - 1, argv + 1);
+  std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
+  return 2;
+}

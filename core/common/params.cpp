@@ -1,0 +1,104 @@
+#include "core/common/params.h"
+
+#include <cmath>
+
+namespace objdb {
+namespace {
+
+Status positive(double v, absl::string_view field) {
+  if (std::isfinite(v) && v > 0.0) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrFormat("%s must be finite and > 0 (got %g)", field, v));
+}
+
+Status inRange(double v, double lo, double hi, absl::string_view field) {
+  if (std::isfinite(v) && v >= lo && v <= hi) return absl::OkStatus();
+  return absl::InvalidArgumentError(
+      absl::StrFormat("%s must be in [%g, %g] (got %g)", field, lo, hi, v));
+}
+
+}  // namespace
+
+Status SegmentationParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(inRange(normal_window_px, 3, 51, "segmentation.normal_window_px"));
+  if (normal_window_px % 2 == 0) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "segmentation.normal_window_px must be odd (got %d)", normal_window_px));
+  }
+  OBJDB_RETURN_IF_ERROR(
+      positive(normal_max_relative_distance, "segmentation.normal_max_relative_distance"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(discontinuity_window_px, 3, 15, "segmentation.discontinuity_window_px"));
+  OBJDB_RETURN_IF_ERROR(positive(discontinuity_threshold, "segmentation.discontinuity_threshold"));
+  OBJDB_RETURN_IF_ERROR(inRange(convexity_window_px, 3, 15, "segmentation.convexity_window_px"));
+  OBJDB_RETURN_IF_ERROR(inRange(convexity_threshold, 0.0, 1.0, "segmentation.convexity_threshold"));
+  OBJDB_RETURN_IF_ERROR(inRange(convexity_offset_m, 0.0, 1.0, "segmentation.convexity_offset_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(min_segment_px, 1, 1 << 24, "segmentation.min_segment_px"));
+  return inRange(max_label_growth_distance_m, 0.0, 10.0,
+                 "segmentation.max_label_growth_distance_m");
+}
+
+Status TsdfParams::validate() const {
+  // 1 mm .. 1 m: below, a room needs billions of voxels; above, nothing is an object.
+  OBJDB_RETURN_IF_ERROR(inRange(voxel_size_m, 0.001, 1.0, "tsdf.voxel_size_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(voxels_per_side, 2, 64, "tsdf.voxels_per_side"));
+  OBJDB_RETURN_IF_ERROR(inRange(truncation_voxels, 1.0, 100.0, "tsdf.truncation_voxels"));
+  OBJDB_RETURN_IF_ERROR(positive(max_ray_length_m, "tsdf.max_ray_length_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(min_ray_length_m, 0.0, max_ray_length_m, "tsdf.min_ray_length_m"));
+  OBJDB_RETURN_IF_ERROR(positive(max_weight, "tsdf.max_weight"));
+  return inRange(mesh_min_weight, 0.0, max_weight, "tsdf.mesh_min_weight");
+}
+
+Status GsmParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(inRange(min_label_voxels, 1, 1 << 30, "gsm.min_label_voxels"));
+  OBJDB_RETURN_IF_ERROR(inRange(merge_overlap_ratio, 0.0, 1.0, "gsm.merge_overlap_ratio"));
+  OBJDB_RETURN_IF_ERROR(inRange(merge_min_frames, 1, 1 << 20, "gsm.merge_min_frames"));
+  OBJDB_RETURN_IF_ERROR(inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames"));
+  return inRange(max_labels_per_voxel, 1, 16, "gsm.max_labels_per_voxel");
+}
+
+Status KeypointParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(positive(harris_radius_m, "keypoints.harris_radius_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(harris_min_neighbors, 1, 10000, "keypoints.harris_min_neighbors"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(harris_curvature_threshold, 0.0, 1.0, "keypoints.harris_curvature_threshold"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(harris_response_threshold, 0.0, 1e6, "keypoints.harris_response_threshold"));
+  OBJDB_RETURN_IF_ERROR(positive(iss_border_radius_m, "keypoints.iss_border_radius_m"));
+  OBJDB_RETURN_IF_ERROR(positive(iss_salient_radius_m, "keypoints.iss_salient_radius_m"));
+  OBJDB_RETURN_IF_ERROR(positive(iss_non_max_radius_m, "keypoints.iss_non_max_radius_m"));
+  return inRange(iss_min_neighbors, 1, 10000, "keypoints.iss_min_neighbors");
+}
+
+Status DescriptorParams::validate() const {
+  return positive(fpfh_radius_m, "descriptors.fpfh_radius_m");
+}
+
+Status MatchingParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(inRange(similarity_threshold, 0.0, 1.0, "matching.similarity_threshold"));
+  OBJDB_RETURN_IF_ERROR(inRange(k_nn, 1, 100, "matching.k_nn"));
+  return positive(icp_max_rmse_m, "matching.icp_max_rmse_m");
+}
+
+double MergingParams::minOverlapVoxels(double voxel_size_m) const {
+  const double ratio = double(reference_voxel_size_m) / voxel_size_m;
+  return double(tsdf_min_overlap_voxels) * ratio * ratio;
+}
+
+Status MergingParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(positive(tsdf_max_rmse_m, "merging.tsdf_max_rmse_m"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(tsdf_min_overlap_voxels, 0.0, 1e9, "merging.tsdf_min_overlap_voxels"));
+  return positive(reference_voxel_size_m, "merging.reference_voxel_size_m");
+}
+
+Status Params::validate() const {
+  OBJDB_RETURN_IF_ERROR(segmentation.validate());
+  OBJDB_RETURN_IF_ERROR(tsdf.validate());
+  OBJDB_RETURN_IF_ERROR(gsm.validate());
+  OBJDB_RETURN_IF_ERROR(keypoints.validate());
+  OBJDB_RETURN_IF_ERROR(descriptors.validate());
+  OBJDB_RETURN_IF_ERROR(matching.validate());
+  return merging.validate();
+}
+
+}  // namespace objdb

@@ -1,0 +1,101 @@
+// Parameter structs of every pipeline stage, with the paper's defaults (table I) and the
+// reference implementations' defaults where the paper is silent (DESIGN.md). One struct per
+// configurable thing; each has validate() naming the bad field. `Params` bundles them; config
+// files (JSON) map onto it in params_io.h, nowhere else.
+#pragma once
+
+#include <string>
+
+#include "core/common/status.h"
+
+namespace objdb {
+
+// §III-A depth segmentation (defaults of ethz-asl depth_segmentation at VGA).
+struct SegmentationParams {
+  int normal_window_px = 13;                  // side of the normal-estimation window
+  float normal_max_relative_distance = 0.05f; // neighbours used only if |Δz| < this · z
+  int discontinuity_window_px = 3;            // kernel of the depth-discontinuity filter
+  float discontinuity_threshold = 0.03f;      // max relative depth jump (|Δd| / d)
+  int convexity_window_px = 5;                // min-convexity window
+  float convexity_threshold = 0.97f;          // below → concave boundary
+  float convexity_offset_m = 0.0005f;         // offsets above −this along the normal are convex
+  int min_segment_px = 500;                   // smaller regions are dropped (VGA; scale for others)
+  float max_label_growth_distance_m = 0.05f;  // edge pixels join a neighbour label within this
+  Status validate() const;
+};
+
+// TSDF volume (voxblox++ iodb_node defaults).
+struct TsdfParams {
+  float voxel_size_m = 0.02f;       // edge of a voxel
+  int voxels_per_side = 8;          // block = voxels_per_side³ voxels
+  float truncation_voxels = 3.0f;   // truncation distance in voxels
+  float max_ray_length_m = 3.5f;    // depth beyond this is skipped (counted)
+  float min_ray_length_m = 0.1f;    // depth below this is skipped (counted)
+  float max_weight = 1000.0f;       // voxel weights saturate here
+  float mesh_min_weight = 3.0f;     // voxels lighter than this are not meshed
+  float truncationDistance() const { return truncation_voxels * voxel_size_m; }
+  Status validate() const;
+};
+
+// §III-B Global Segmentation Map (voxblox++ iodb_node defaults).
+struct GsmParams {
+  int min_label_voxels = 20;             // labels with fewer voxels are not extracted
+  float merge_overlap_ratio = 0.1f;      // pairwise label overlap that counts as evidence
+  int merge_min_frames = 2;              // frames of evidence before two labels merge
+  int extraction_age_frames = 10;        // a label untouched this long is extracted
+  int max_labels_per_voxel = 4;          // bound of the per-voxel label history
+  Status validate() const;
+};
+
+// §III-C.2 keypoints (table I).
+struct KeypointParams {
+  float harris_radius_m = 0.03f;         // r_H
+  int harris_min_neighbors = 10;         // k_NN^min (Harris3D)
+  float harris_curvature_threshold = 0.07f;  // t_curv
+  float harris_response_threshold = 1e-6f;   // t_resp
+  float iss_border_radius_m = 0.02f;     // r_b
+  float iss_salient_radius_m = 0.06f;    // r_s
+  float iss_non_max_radius_m = 0.08f;    // r_nm
+  int iss_min_neighbors = 5;             // k_NN^min (ISS)
+  Status validate() const;
+};
+
+// §III-C.2 descriptors (table I).
+struct DescriptorParams {
+  float fpfh_radius_m = 0.10f;  // r
+  Status validate() const;
+};
+
+// §III-C.3 matching and registration (table I).
+struct MatchingParams {
+  float similarity_threshold = 0.4f;  // t_sim
+  int k_nn = 5;                       // k_NN best descriptor matches per keypoint
+  float icp_max_rmse_m = 0.02f;       // e*_ICP
+  Status validate() const;
+};
+
+// §III-C.4 merging and verification (table I).
+struct MergingParams {
+  float tsdf_max_rmse_m = 0.02f;  // e*_TSDF
+  // o*_TSDF: the paper's 10^4 overlapping voxels. Overlap is counted in the truncation band, a
+  // shell of (2 · truncation_voxels) voxels around the surface, so for a fixed surface area it
+  // grows with 1 / voxel²: the threshold is given at reference_voxel_size_m and scaled by
+  // (reference / actual voxel size)² (see minOverlapVoxels).
+  float tsdf_min_overlap_voxels = 1e4f;
+  float reference_voxel_size_m = 0.01f;
+  double minOverlapVoxels(double voxel_size_m) const;
+  Status validate() const;
+};
+
+struct Params {
+  SegmentationParams segmentation;
+  TsdfParams tsdf;
+  GsmParams gsm;
+  KeypointParams keypoints;
+  DescriptorParams descriptors;
+  MatchingParams matching;
+  MergingParams merging;
+  Status validate() const;
+};
+
+}  // namespace objdb

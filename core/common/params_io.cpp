@@ -1,0 +1,179 @@
+#include "core/common/params_io.h"
+
+#include <fstream>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+namespace objdb {
+namespace {
+
+using nlohmann::json;
+
+// Field table per struct: one place that lists every configurable field by its JSON name.
+template <typename Fn>
+void forEachField(SegmentationParams& p, Fn&& fn) {
+  fn("normal_window_px", p.normal_window_px);
+  fn("normal_max_relative_distance", p.normal_max_relative_distance);
+  fn("discontinuity_window_px", p.discontinuity_window_px);
+  fn("discontinuity_threshold", p.discontinuity_threshold);
+  fn("convexity_window_px", p.convexity_window_px);
+  fn("convexity_threshold", p.convexity_threshold);
+  fn("convexity_offset_m", p.convexity_offset_m);
+  fn("min_segment_px", p.min_segment_px);
+  fn("max_label_growth_distance_m", p.max_label_growth_distance_m);
+}
+template <typename Fn>
+void forEachField(TsdfParams& p, Fn&& fn) {
+  fn("voxel_size_m", p.voxel_size_m);
+  fn("voxels_per_side", p.voxels_per_side);
+  fn("truncation_voxels", p.truncation_voxels);
+  fn("max_ray_length_m", p.max_ray_length_m);
+  fn("min_ray_length_m", p.min_ray_length_m);
+  fn("max_weight", p.max_weight);
+  fn("mesh_min_weight", p.mesh_min_weight);
+}
+template <typename Fn>
+void forEachField(GsmParams& p, Fn&& fn) {
+  fn("min_label_voxels", p.min_label_voxels);
+  fn("merge_overlap_ratio", p.merge_overlap_ratio);
+  fn("merge_min_frames", p.merge_min_frames);
+  fn("extraction_age_frames", p.extraction_age_frames);
+  fn("max_labels_per_voxel", p.max_labels_per_voxel);
+}
+template <typename Fn>
+void forEachField(KeypointParams& p, Fn&& fn) {
+  fn("harris_radius_m", p.harris_radius_m);
+  fn("harris_min_neighbors", p.harris_min_neighbors);
+  fn("harris_curvature_threshold", p.harris_curvature_threshold);
+  fn("harris_response_threshold", p.harris_response_threshold);
+  fn("iss_border_radius_m", p.iss_border_radius_m);
+  fn("iss_salient_radius_m", p.iss_salient_radius_m);
+  fn("iss_non_max_radius_m", p.iss_non_max_radius_m);
+  fn("iss_min_neighbors", p.iss_min_neighbors);
+}
+template <typename Fn>
+void forEachField(DescriptorParams& p, Fn&& fn) {
+  fn("fpfh_radius_m", p.fpfh_radius_m);
+}
+template <typename Fn>
+void forEachField(MatchingParams& p, Fn&& fn) {
+  fn("similarity_threshold", p.similarity_threshold);
+  fn("k_nn", p.k_nn);
+  fn("icp_max_rmse_m", p.icp_max_rmse_m);
+}
+template <typename Fn>
+void forEachField(MergingParams& p, Fn&& fn) {
+  fn("tsdf_max_rmse_m", p.tsdf_max_rmse_m);
+  fn("tsdf_min_overlap_voxels", p.tsdf_min_overlap_voxels);
+  fn("reference_voxel_size_m", p.reference_voxel_size_m);
+}
+template <typename Fn>
+void forEachSection(Params& p, Fn&& fn) {
+  fn("segmentation", p.segmentation);
+  fn("tsdf", p.tsdf);
+  fn("gsm", p.gsm);
+  fn("keypoints", p.keypoints);
+  fn("descriptors", p.descriptors);
+  fn("matching", p.matching);
+  fn("merging", p.merging);
+}
+
+template <typename T>
+Status readNumber(const json& value, const std::string& key, T* out) {
+  if constexpr (std::is_integral_v<T>) {
+    if (!value.is_number_integer()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("config key '", key, "' must be an integer (got ", value.dump(), ")"));
+    }
+    const auto v = value.get<int64_t>();
+    if (v < std::numeric_limits<T>::min() || v > std::numeric_limits<T>::max()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("config key '", key, "' is out of range (got ", v, ")"));
+    }
+    *out = static_cast<T>(v);
+  } else {
+    if (!value.is_number()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("config key '", key, "' must be a number (got ", value.dump(), ")"));
+    }
+    *out = value.get<T>();
+  }
+  return absl::OkStatus();
+}
+
+template <typename Section>
+Status applySection(const json& object, const std::string& section, Section* params) {
+  if (!object.is_object()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("config key '", section, "' must be an object"));
+  }
+  Status status;
+  size_t known = 0;
+  forEachField(*params, [&](const char* name, auto& field) {
+    const auto it = object.find(name);
+    if (it == object.end() || !status.ok()) return;
+    ++known;
+    status = readNumber(*it, section + "." + name, &field);
+  });
+  OBJDB_RETURN_IF_ERROR(status);
+  if (known != object.size()) {
+    for (const auto& [key, value] : object.items()) {
+      bool found = false;
+      forEachField(*params, [&](const char* name, auto&) { found = found || key == name; });
+      if (!found) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("unknown config key '", section, ".", key, "'"));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+Status applyParamsJson(absl::string_view text, Params* params) {
+  json root;
+  try {
+    root = json::parse(text.begin(), text.end());
+  } catch (const json::parse_error& e) {
+    return absl::InvalidArgumentError(absl::StrCat("config is not valid JSON: ", e.what()));
+  }
+  if (!root.is_object()) return absl::InvalidArgumentError("config must be a JSON object");
+  Params updated = *params;
+  for (const auto& [key, value] : root.items()) {
+    Status status = absl::InvalidArgumentError(absl::StrCat(
+        "unknown config section '", key,
+        "' (known: segmentation, tsdf, gsm, keypoints, descriptors, matching, merging)"));
+    forEachSection(updated, [&](const char* name, auto& section) {
+      if (key == name) status = applySection(value, key, &section);
+    });
+    OBJDB_RETURN_IF_ERROR(status);
+  }
+  OBJDB_RETURN_IF_ERROR(updated.validate());
+  *params = updated;
+  return absl::OkStatus();
+}
+
+StatusOr<Params> loadParamsFile(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  if (!in) return absl::NotFoundError(absl::StrCat("cannot open config file ", path.string()));
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  Params params;
+  OBJDB_RETURN_IF_ERROR(annotate(applyParamsJson(buffer.str(), &params), path.string()));
+  return params;
+}
+
+std::string paramsToJson(const Params& params) {
+  Params copy = params;
+  json root = json::object();
+  forEachSection(copy, [&](const char* section, auto& fields) {
+    json object = json::object();
+    forEachField(fields, [&](const char* name, auto& field) { object[name] = field; });
+    root[section] = object;
+  });
+  return root.dump(2);
+}
+
+}  // namespace objdb

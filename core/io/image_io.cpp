@@ -1,0 +1,275 @@
+#include "core/io/image_io.h"
+
+#include <array>
+#include <cstring>
+#include <fstream>
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/common/intrinsics.h"
+#include "core/io/io_util.h"
+
+namespace objdb::io {
+namespace {
+namespace fs = std::filesystem;
+
+enum class FileFormat { kPng, kJpeg, kOther };
+
+// What the file header says, read before OpenCV decodes (and allocates) anything.
+struct HeaderInfo {
+  FileFormat format = FileFormat::kOther;
+  int64_t width = -1;   // -1 when the header did not say
+  int64_t height = -1;
+  int bit_depth = -1;   // PNG only
+  int channels = -1;    // PNG only: from the colour type (palette counts as 3)
+};
+
+uint32_t bigEndian32(const unsigned char* p) {
+  return (uint32_t(p[0]) << 24) | (uint32_t(p[1]) << 16) | (uint32_t(p[2]) << 8) | uint32_t(p[3]);
+}
+
+// Walks the JPEG marker segments up to the first start-of-frame, which holds the image size.
+// Leaves width/height at -1 when it cannot tell (OpenCV then decides).
+void scanJpegHeader(std::ifstream& in, HeaderInfo* info) {
+  in.seekg(2);
+  for (int segment = 0; segment < 4096; ++segment) {
+    int c = in.get();
+    if (c != 0xFF) return;
+    while (c == 0xFF) c = in.get();  // fill bytes
+    if (c == EOF) return;
+    const int marker = c;
+    if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) continue;
+    if (marker == 0xD9 || marker == 0xDA) return;  // end of image / start of scan
+    unsigned char length_bytes[2];
+    if (!in.read(reinterpret_cast<char*>(length_bytes), 2)) return;
+    const int length = (length_bytes[0] << 8) | length_bytes[1];
+    if (length < 2) return;
+    const bool is_sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 &&
+                        marker != 0xCC;
+    if (is_sof) {
+      unsigned char sof[5];
+      if (length < 7 || !in.read(reinterpret_cast<char*>(sof), 5)) return;
+      info->height = (sof[1] << 8) | sof[2];
+      info->width = (sof[3] << 8) | sof[4];
+      return;
+    }
+    in.seekg(length - 2, std::ios::cur);
+    if (!in) return;
+  }
+}
+
+StatusOr<HeaderInfo> readHeader(const fs::path& path) {
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (!fs::exists(status)) {
+    return absl::NotFoundError(absl::StrCat("image ", path.string(), " does not exist"));
+  }
+  if (!fs::is_regular_file(status)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("image ", path.string(), " is not a regular file"));
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::UnavailableError(absl::StrCat("cannot open image ", path.string()));
+  std::array<unsigned char, 33> head{};
+  in.read(reinterpret_cast<char*>(head.data()), head.size());
+  const size_t got = static_cast<size_t>(in.gcount());
+  in.clear();
+  HeaderInfo info;
+  static constexpr unsigned char kPngSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
+  if (got >= 8 && std::memcmp(head.data(), kPngSignature, 8) == 0) {
+    info.format = FileFormat::kPng;
+    if (got < 33 || std::memcmp(head.data() + 12, "IHDR", 4) != 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(path.string(), " is a truncated PNG (no IHDR header)"));
+    }
+    info.width = bigEndian32(head.data() + 16);
+    info.height = bigEndian32(head.data() + 20);
+    info.bit_depth = head[24];
+    switch (head[25]) {
+      case 0: info.channels = 1; break;
+      case 2: info.channels = 3; break;
+      case 3: info.channels = 3; break;
+      case 4: info.channels = 2; break;
+      case 6: info.channels = 4; break;
+      default:
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "%s has an invalid PNG colour type %d", path.string(), int(head[25])));
+    }
+  } else if (got >= 3 && head[0] == 0xFF && head[1] == 0xD8 && head[2] == 0xFF) {
+    info.format = FileFormat::kJpeg;
+    scanJpegHeader(in, &info);
+  }
+  return info;
+}
+
+Status checkHeaderSize(const fs::path& path, const HeaderInfo& info) {
+  if (info.width < 0) return absl::OkStatus();
+  if (info.width >= 1 && info.width <= kMaxImageSide && info.height >= 1 &&
+      info.height <= kMaxImageSide) {
+    return absl::OkStatus();
+  }
+  return absl::InvalidArgumentError(
+      absl::StrFormat("%s is %dx%d pixels; expected 1..%d per side", path.string(), info.width,
+                      info.height, kMaxImageSide));
+}
+
+StatusOr<cv::Mat> decode(const fs::path& path) {
+  cv::Mat mat;
+  try {
+    mat = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cannot decode image ", path.string(), ": ", e.what()));
+  }
+  if (mat.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cannot decode image ", path.string(), " (corrupt or truncated file)"));
+  }
+  if (!(mat.dims == 2 && mat.cols >= 1 && mat.cols <= kMaxImageSide && mat.rows >= 1 &&
+        mat.rows <= kMaxImageSide)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s is %dx%d pixels; expected 1..%d per side", path.string(), mat.cols, mat.rows,
+        kMaxImageSide));
+  }
+  return mat;
+}
+
+const char* depthName(int cv_depth) {
+  switch (cv_depth) {
+    case CV_8U: return "8-bit";
+    case CV_8S: return "8-bit signed";
+    case CV_16U: return "16-bit";
+    case CV_16S: return "16-bit signed";
+    case CV_32S: return "32-bit integer";
+    case CV_32F: return "32-bit float";
+    case CV_64F: return "64-bit float";
+    default: return "of unknown depth";
+  }
+}
+
+bool hasPngExtension(const fs::path& path) {
+  return internal::toLower(path.extension().string()) == ".png";
+}
+
+Status checkImageForWrite(const fs::path& path, int width, int height, size_t pixels) {
+  if (!hasPngExtension(path)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cannot write ", path.string(), ": the name must end in .png"));
+  }
+  if (!(width >= 1 && width <= kMaxImageSide && height >= 1 && height <= kMaxImageSide)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "cannot write %s: image is %dx%d; expected 1..%d per side", path.string(), width, height,
+        kMaxImageSide));
+  }
+  if (pixels != size_t(width) * size_t(height)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "cannot write %s: image is %dx%d but holds %d pixels", path.string(), width, height,
+        pixels));
+  }
+  return absl::OkStatus();
+}
+
+Status encodeAndWrite(const fs::path& path, const cv::Mat& mat) {
+  std::vector<uchar> buffer;
+  try {
+    if (!cv::imencode(".png", mat, buffer)) {
+      return absl::InternalError(absl::StrCat("cannot encode ", path.string(), " as PNG"));
+    }
+  } catch (const cv::Exception& e) {
+    return absl::InternalError(
+        absl::StrCat("cannot encode ", path.string(), " as PNG: ", e.what()));
+  }
+  return internal::writeFileAtomic(
+      path, absl::string_view(reinterpret_cast<const char*>(buffer.data()), buffer.size()));
+}
+
+}  // namespace
+
+StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
+  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(path));
+  if (header.format != FileFormat::kPng) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path.string(), " is not a PNG file; expected a 16-bit single-channel PNG"));
+  }
+  OBJDB_RETURN_IF_ERROR(checkHeaderSize(path, header));
+  if (header.bit_depth != 16) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s is %d-bit; expected 16-bit single channel", path.string(), header.bit_depth));
+  }
+  if (header.channels != 1) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s has %d channels; expected 16-bit single channel", path.string(),
+                        header.channels));
+  }
+  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(path));
+  if (mat.depth() != CV_16U || mat.channels() != 1) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s decodes as %s with %d channels; expected 16-bit single channel",
+                        path.string(), depthName(mat.depth()), mat.channels()));
+  }
+  RawDepthImage image(mat.cols, mat.rows);
+  for (int v = 0; v < mat.rows; ++v) {
+    std::memcpy(&image.at(0, v), mat.ptr<uint16_t>(v), size_t(mat.cols) * sizeof(uint16_t));
+  }
+  return image;
+}
+
+Status writeUint16Png(const fs::path& path, const Image<uint16_t>& image) {
+  OBJDB_RETURN_IF_ERROR(checkImageForWrite(path, image.width, image.height, image.data.size()));
+  const cv::Mat mat(image.height, image.width, CV_16UC1,
+                    const_cast<uint16_t*>(image.data.data()));
+  return encodeAndWrite(path, mat);
+}
+
+StatusOr<ColorImage> readColorImage(const fs::path& path) {
+  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(path));
+  if (header.format == FileFormat::kOther) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path.string(), " is neither PNG nor JPEG; expected an 8-bit colour image"));
+  }
+  OBJDB_RETURN_IF_ERROR(checkHeaderSize(path, header));
+  if (header.format == FileFormat::kPng && header.bit_depth > 8) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s is %d-bit; expected an 8-bit colour image", path.string(), header.bit_depth));
+  }
+  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(path));
+  if (mat.depth() != CV_8U) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s is %s; expected an 8-bit colour image", path.string(), depthName(mat.depth())));
+  }
+  const int channels = mat.channels();
+  if (channels != 3 && channels != 1) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s has %d channels; expected 3 (colour) or 1 (grey)", path.string(), channels));
+  }
+  ColorImage image(mat.cols, mat.rows);
+  for (int v = 0; v < mat.rows; ++v) {
+    const uint8_t* row = mat.ptr<uint8_t>(v);
+    Rgb8* out = &image.at(0, v);
+    if (channels == 3) {
+      for (int u = 0; u < mat.cols; ++u) out[u] = {row[3 * u + 2], row[3 * u + 1], row[3 * u]};
+    } else {
+      for (int u = 0; u < mat.cols; ++u) out[u] = {row[u], row[u], row[u]};
+    }
+  }
+  return image;
+}
+
+Status writeColorPng(const fs::path& path, const ColorImage& image) {
+  OBJDB_RETURN_IF_ERROR(checkImageForWrite(path, image.width, image.height, image.data.size()));
+  cv::Mat mat(image.height, image.width, CV_8UC3);
+  for (int v = 0; v < image.height; ++v) {
+    uint8_t* row = mat.ptr<uint8_t>(v);
+    const Rgb8* in = &image.at(0, v);
+    for (int u = 0; u < image.width; ++u) {
+      row[3 * u] = in[u].b;
+      row[3 * u + 1] = in[u].g;
+      row[3 * u + 2] = in[u].r;
+    }
+  }
+  return encodeAndWrite(path, mat);
+}
+
+}  // namespace objdb::io

@@ -1,0 +1,22 @@
+// Mesh and point-cloud files: PLY (ASCII and binary little/big endian) read and write, OBJ and
+// STL (ASCII and binary) read. Errors name the file and the line or element that is wrong.
+#pragma once
+
+#include <filesystem>
+
+#include "core/common/mesh.h"
+
+namespace objdb::io {
+
+// Reads a triangle mesh, choosing the format by extension (.ply, .obj, .stl; case-insensitive).
+// Polygons with more than three corners are fanned into triangles. Vertex normals/colours are
+// kept when the file has them.
+StatusOr<TriangleMesh> readMesh(const std::filesystem::path& path);
+
+// Binary little-endian PLY (ASCII when `ascii`), with normals and colours when present.
+Status writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh,
+                    bool ascii = false);
+Status writePlyCloud(const std::filesystem::path& path, const PointCloud& cloud,
+                     bool ascii = false);
+
+}  // namespace objdb::io

@@ -1,0 +1,49 @@
+// Depth-sensor noise for the synthetic world (Kinect/Tango-like, after Nguyen et al. 2012):
+// axial Gaussian noise σ(z) = σ₀ + σ₂·(z − z₀)², quantisation, a working range, dropouts at
+// grazing angles and at depth edges. Deterministic: every random draw is a hash of (seed, frame
+// index, pixel, draw), so the same seed gives the same image whatever the thread count.
+#pragma once
+
+#include <cstdint>
+
+#include "core/common/image.h"
+
+namespace objdb::sim {
+
+struct DepthNoiseParams {
+  bool enabled = true;
+  uint64_t seed = 1;
+  float sigma_base_m = 0.0012f;        // σ₀
+  float sigma_quadratic = 0.0019f;     // σ₂, metres per metre²
+  float sigma_reference_m = 0.4f;      // z₀
+  float quantum_m = 0.001f;            // depth step after noise (0 = none)
+  float min_depth_m = 0.2f;            // closer → no measurement
+  float max_depth_m = 6.0f;            // farther → no measurement
+  float grazing_start_deg = 70.0f;     // dropout probability rises from 0 here ...
+  float grazing_full_deg = 85.0f;      // ... to 1 here (angle between ray and normal)
+  float edge_jump_m = 0.05f;           // a 4-neighbour this much farther/closer marks an edge
+  float edge_dropout_probability = 0.5f;
+  Status validate() const;
+  float sigmaAt(float z) const {
+    const float d = z - sigma_reference_m;
+    return sigma_base_m + sigma_quadratic * d * d;
+  }
+};
+
+// Counts of what the noise model did to one image.
+struct NoiseStats {
+  size_t out_of_range = 0;
+  size_t grazing_dropouts = 0;
+  size_t edge_dropouts = 0;
+};
+
+// Applies noise in place to `depth` (metres, 0 = none). `cos_incidence` comes from the renderer
+// (same size). Does nothing when !params.enabled.
+NoiseStats applyDepthNoise(const DepthNoiseParams& params, uint64_t frame_index,
+                           const Image<float>& cos_incidence, DepthImage* depth);
+
+// Deterministic counter-based random numbers (splitmix64 of the key).
+double uniform01(uint64_t seed, uint64_t frame, uint64_t pixel, uint64_t draw);
+double standardNormal(uint64_t seed, uint64_t frame, uint64_t pixel, uint64_t draw);
+
+}  // namespace objdb::sim

@@ -1,0 +1,188 @@
+// objdb-server: command line, configuration check, serving until SIGINT/SIGTERM.
+#include <cstdio>
+#include <string>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "core/common/logging.h"
+#include "core/common/params_io.h"
+#include "server/server.h"
+#include "server/shutdown_signals.h"
+
+namespace {
+
+constexpr int kExitUsage = 2;
+constexpr int kExitCannotStart = 1;
+
+std::string usage() {
+  const objdb::ServerOptions defaults;
+  return absl::StrFormat(
+      R"(usage: objdb-server [options]
+
+Serves the objdb object database over gRPC (service objdb.v1.ObjectDatabase) together with the
+standard health service (grpc.health.v1.Health). SIGINT or SIGTERM drains calls in flight and
+stops the server; a second signal exits at once.
+
+options:
+  --listen HOST:PORT      address to listen on (default %s); port 0 picks a free
+                          port. The address is logged as "listening on HOST:PORT".
+  --allow-remote          accept a non-loopback --listen address such as 0.0.0.0:50051. The
+                          server has no authentication yet: anyone who can reach the port can
+                          read and write the database.
+  --db PATH               SQLite database file (default %s)
+  --config FILE           pipeline parameters as JSON, e.g. {"tsdf": {"voxel_size_m": 0.01}};
+                          checked at startup: unknown keys and bad values refuse the start
+  --print-config          print the effective parameters (defaults + --config) as JSON, exit
+  --max-message-mib N     largest gRPC message received or sent, MiB, 1..1024 (default %d)
+  --drain-deadline-ms N   on shutdown, time calls in flight get to finish (default %d)
+  --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
+  -h, --help              show this text and exit
+
+exit status: 0 after a clean shutdown, 1 if the server cannot start (bad configuration, address
+in use), 2 on a command-line error.
+)",
+      defaults.listen_address, defaults.db_path, defaults.max_receive_message_bytes >> 20,
+      static_cast<int>(defaults.drain_deadline.count()));
+}
+
+struct CommandLine {
+  objdb::ServerOptions options;
+  std::string config_path;
+  std::string log_level = "info";
+  bool help = false;
+  bool print_config = false;
+};
+
+// Fills `cli` from argv; on a usage error returns false with `error` set. Accepts "--flag value"
+// and "--flag=value".
+bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* error) {
+  for (int i = 1; i < argc; ++i) {
+    std::string arg = argv[i];
+    std::string value;
+    bool has_inline_value = false;
+    if (const size_t eq = arg.find('='); arg.rfind("--", 0) == 0 && eq != std::string::npos) {
+      value = arg.substr(eq + 1);
+      arg = arg.substr(0, eq);
+      has_inline_value = true;
+    }
+    auto take_value = [&](std::string* out) {
+      if (has_inline_value) {
+        *out = value;
+        return true;
+      }
+      if (i + 1 >= argc) {
+        *error = absl::StrFormat("%s needs a value", arg);
+        return false;
+      }
+      *out = argv[++i];
+      return true;
+    };
+    auto take_int = [&](int min, int max, int* out) {
+      std::string text;
+      if (!take_value(&text)) return false;
+      if (!absl::SimpleAtoi(text, out) || *out < min || *out > max) {
+        *error =
+            absl::StrFormat("%s must be an integer in [%d, %d], got \"%s\"", arg, min, max, text);
+        return false;
+      }
+      return true;
+    };
+    auto no_value = [&]() {
+      if (has_inline_value) *error = absl::StrFormat("%s takes no value", arg);
+      return !has_inline_value;
+    };
+
+    if (arg == "-h" || arg == "--help") {
+      if (!no_value()) return false;
+      cli->help = true;
+    } else if (arg == "--listen") {
+      if (!take_value(&cli->options.listen_address)) return false;
+    } else if (arg == "--allow-remote") {
+      if (!no_value()) return false;
+      cli->options.allow_remote = true;
+    } else if (arg == "--db") {
+      if (!take_value(&cli->options.db_path)) return false;
+    } else if (arg == "--config") {
+      if (!take_value(&cli->config_path)) return false;
+    } else if (arg == "--print-config") {
+      if (!no_value()) return false;
+      cli->print_config = true;
+    } else if (arg == "--max-message-mib") {
+      int mib = 0;
+      if (!take_int(1, objdb::kMaxMessageBytes >> 20, &mib)) return false;
+      cli->options.max_receive_message_bytes = mib << 20;
+      cli->options.max_send_message_bytes = mib << 20;
+    } else if (arg == "--drain-deadline-ms") {
+      int ms = 0;
+      if (!take_int(0, static_cast<int>(objdb::kMaxDrainDeadline.count()), &ms)) return false;
+      cli->options.drain_deadline = std::chrono::milliseconds(ms);
+    } else if (arg == "--log-level") {
+      if (!take_value(&cli->log_level)) return false;
+    } else {
+      *error = absl::StrFormat("unknown option \"%s\"", argv[i]);
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Before anything can start a thread: every thread inherits the blocked mask, so SIGINT and
+  // SIGTERM only ever reach the watcher's sigwait().
+  if (!objdb::blockShutdownSignals()) {
+    std::fprintf(stderr, "objdb-server: cannot block SIGINT/SIGTERM\n");
+    return kExitCannotStart;
+  }
+
+  CommandLine cli;
+  std::string error;
+  if (!parseCommandLine(argc, argv, &cli, &error)) {
+    std::fprintf(stderr, "objdb-server: %s\n\n%s", error.c_str(), usage().c_str());
+    return kExitUsage;
+  }
+  if (cli.help) {
+    std::fputs(usage().c_str(), stdout);
+    return 0;
+  }
+  if (!objdb::setLogLevel(cli.log_level)) {
+    std::fprintf(stderr,
+                 "objdb-server: unknown --log-level \"%s\" (use trace, debug, info, warn, error, "
+                 "critical or off)\n",
+                 cli.log_level.c_str());
+    return kExitUsage;
+  }
+
+  if (!cli.config_path.empty()) {
+    objdb::StatusOr<objdb::Params> params = objdb::loadParamsFile(cli.config_path);
+    if (!params.ok()) {
+      std::fprintf(stderr, "objdb-server: bad --config: %s\n",
+                   std::string(params.status().message()).c_str());
+      return kExitCannotStart;
+    }
+    cli.options.params = *std::move(params);
+  }
+  if (cli.print_config) {
+    std::fputs((objdb::paramsToJson(cli.options.params) + "\n").c_str(), stdout);
+    return 0;
+  }
+  if (const objdb::Status valid = cli.options.validate(); !valid.ok()) {
+    std::fprintf(stderr, "objdb-server: %s\n", std::string(valid.message()).c_str());
+    return kExitCannotStart;
+  }
+
+  auto log = objdb::logger("server");
+  log->info("database {}: not opened, storage is not implemented yet (nothing is stored)",
+            cli.options.db_path);
+  objdb::ShutdownSignalWatcher signals;
+  objdb::StatusOr<std::unique_ptr<objdb::ObjdbServer>> server =
+      objdb::ObjdbServer::start(cli.options);
+  if (!server.ok()) {
+    std::fprintf(stderr, "objdb-server: %s\n", std::string(server.status().message()).c_str());
+    return kExitCannotStart;
+  }
+  signals.waitForRequest();
+  (*server)->shutdown();
+  return 0;
+}

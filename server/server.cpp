@@ -1,0 +1,183 @@
+#include "server/server.h"
+
+#include <arpa/inet.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <netinet/in.h>
+
+#include <algorithm>
+#include <cctype>
+#include <utility>
+
+#include "core/common/logging.h"
+#include "server/pending_object_database.h"
+
+namespace objdb {
+namespace {
+
+bool isDigits(const std::string& text) {
+  return !text.empty() &&
+         std::all_of(text.begin(), text.end(), [](unsigned char c) { return std::isdigit(c); });
+}
+
+// RFC 1123 host name: dot-separated labels of letters, digits and '-', 1..63 characters each,
+// not starting or ending with '-'; at most 253 characters.
+bool isHostName(const std::string& host) {
+  if (host.empty() || host.size() > 253) return false;
+  size_t start = 0;
+  while (start <= host.size()) {
+    size_t end = host.find('.', start);
+    if (end == std::string::npos) end = host.size();
+    const std::string label = host.substr(start, end - start);
+    if (label.empty() || label.size() > 63 || label.front() == '-' || label.back() == '-') {
+      return false;
+    }
+    for (unsigned char c : label) {
+      if (!std::isalnum(c) && c != '-') return false;
+    }
+    start = end + 1;
+  }
+  return true;
+}
+
+}  // namespace
+
+StatusOr<ListenAddress> parseListenAddress(const std::string& address) {
+  auto bad = [&address](absl::string_view why) {
+    return absl::InvalidArgumentError(absl::StrCat("listen address \"", address, "\" ", why,
+                                                   " (expected HOST:PORT, e.g. 127.0.0.1:50051)"));
+  };
+  if (address.empty()) return bad("is empty");
+  const size_t colon = address.rfind(':');
+  if (colon == std::string::npos) return bad("has no port");
+
+  ListenAddress result;
+  result.host = address.substr(0, colon);
+  const std::string port_text = address.substr(colon + 1);
+  if (!isDigits(port_text) || port_text.size() > 5) return bad("has no valid port number");
+  result.port = std::stoi(port_text);
+  if (result.port > 65535) return bad("has a port above 65535");
+  if (result.host.empty()) return bad("has no host");
+
+  if (result.host.front() == '[') {
+    if (result.host.size() < 3 || result.host.back() != ']') return bad("has an unclosed '['");
+    const std::string inner = result.host.substr(1, result.host.size() - 2);
+    in6_addr ip6{};
+    if (inet_pton(AF_INET6, inner.c_str(), &ip6) != 1) return bad("has an invalid IPv6 address");
+    result.loopback =
+        IN6_IS_ADDR_LOOPBACK(&ip6) || (IN6_IS_ADDR_V4MAPPED(&ip6) && ip6.s6_addr[12] == 127);
+  } else if (result.host.find(':') != std::string::npos) {
+    return bad("has an IPv6 address without brackets (write [::1]:PORT)");
+  } else if (std::all_of(result.host.begin(), result.host.end(),
+                         [](unsigned char c) { return std::isdigit(c) || c == '.'; })) {
+    in_addr ip4{};
+    if (inet_pton(AF_INET, result.host.c_str(), &ip4) != 1) {
+      return bad("has an invalid IPv4 address");
+    }
+    result.loopback = (ntohl(ip4.s_addr) >> 24) == 127;
+  } else {
+    if (!isHostName(result.host)) return bad("has an invalid host name");
+    std::string lower = result.host;
+    std::transform(lower.begin(), lower.end(), lower.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    result.loopback = lower == "localhost";
+  }
+  return result;
+}
+
+Status ServerOptions::validate() const {
+  StatusOr<ListenAddress> address = parseListenAddress(listen_address);
+  if (!address.ok()) return annotate(address.status(), "listen_address");
+  if (!address->loopback && !allow_remote) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "listen_address \"", listen_address,
+        "\" is not a loopback address; the server has no authentication yet, so anyone who can "
+        "reach it could read and write the database: set allow_remote (--allow-remote) to "
+        "listen there anyway"));
+  }
+  if (db_path.empty()) return absl::InvalidArgumentError("db_path is empty");
+  for (const auto& [name, value] :
+       {std::pair{"max_receive_message_bytes", max_receive_message_bytes},
+        std::pair{"max_send_message_bytes", max_send_message_bytes}}) {
+    if (value < kMinMessageBytes || value > kMaxMessageBytes) {
+      return absl::InvalidArgumentError(absl::StrFormat("%s is %d bytes, must be in [%d, %d]", name,
+                                                        value, kMinMessageBytes, kMaxMessageBytes));
+    }
+  }
+  if (drain_deadline.count() < 0 || drain_deadline > kMaxDrainDeadline) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("drain_deadline is %d ms, must be in [0, %d] ms",
+                        static_cast<int64_t>(drain_deadline.count()),
+                        static_cast<int64_t>(kMaxDrainDeadline.count())));
+  }
+  return annotate(params.validate(), "params");
+}
+
+StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& options) {
+  OBJDB_RETURN_IF_ERROR(options.validate());
+  OBJDB_ASSIGN_OR_RETURN(const ListenAddress address, parseListenAddress(options.listen_address));
+
+  grpc::EnableDefaultHealthCheckService(true);
+  auto service = std::make_unique<PendingObjectDatabaseService>();
+  grpc::ServerBuilder builder;
+  builder.RegisterService(service.get());
+  int port = 0;
+  // Plaintext until the authentication issue (RELIABILITY.md R11) adds TLS and tokens; until
+  // then validate() keeps the server on loopback unless allow_remote is set.
+  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &port);
+  builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
+  builder.SetMaxSendMessageSize(options.max_send_message_bytes);
+  // gRPC sets SO_REUSEPORT by default on Linux, which lets a second server bind a port that is
+  // already in use and silently share its traffic. A busy port must be an error instead.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+
+  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  if (server == nullptr || port == 0) {
+    if (server != nullptr) server->Shutdown();
+    return absl::UnavailableError(absl::StrCat(
+        "cannot listen on ", options.listen_address,
+        ": the port is in use, the host is not an address of this machine, or binding it is not "
+        "permitted"));
+  }
+  if (grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService()) {
+    health->SetServingStatus(true);
+    // The server is up, but the API itself does not work yet: say so to anyone who asks.
+    health->SetServingStatus(kObjectDatabaseServiceName, false);
+  }
+  std::unique_ptr<ObjdbServer> result(
+      new ObjdbServer(options, std::move(service), std::move(server), address.host, port));
+  logger("server")->info("listening on {}", result->address());
+  return result;
+}
+
+ObjdbServer::ObjdbServer(ServerOptions options,
+                         std::unique_ptr<PendingObjectDatabaseService> service,
+                         std::unique_ptr<grpc::Server> server, std::string host, int port)
+    : options_(std::move(options)),
+      service_(std::move(service)),
+      server_(std::move(server)),
+      host_(std::move(host)),
+      port_(port) {}
+
+ObjdbServer::~ObjdbServer() { shutdown(); }
+
+std::string ObjdbServer::address() const { return absl::StrCat(host_, ":", port_); }
+
+void ObjdbServer::shutdown() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (stopped_) return;
+  auto log = logger("server");
+  log->info("draining {}: health NOT_SERVING, calls in flight have {} ms to finish", address(),
+            options_.drain_deadline.count());
+  if (grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService()) {
+    health->SetServingStatus(false);
+  }
+  server_->Shutdown(std::chrono::system_clock::now() + options_.drain_deadline);
+  server_->Wait();
+  stopped_ = true;
+  log->info("stopped serving {}", address());
+}
+
+bool ObjdbServer::stopped() const { return stopped_.load(); }
+
+}  // namespace objdb

@@ -1,0 +1,101 @@
+// The objdb gRPC server: options, listen-address policy, startup and graceful shutdown.
+// Serves the standard grpc.health.v1 health service. The ObjectDatabase RPCs land with the session
+// and storage issues; until then each answers UNIMPLEMENTED naming what it waits for, and the
+// health status of the service name "objdb.v1.ObjectDatabase" is NOT_SERVING.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "core/common/params.h"
+#include "core/common/status.h"
+
+namespace grpc {
+class Server;
+}  // namespace grpc
+
+namespace objdb {
+
+class PendingObjectDatabaseService;
+
+// A parsed HOST:PORT listen address.
+struct ListenAddress {
+  std::string host;       // as written, IPv6 with its brackets: "127.0.0.1", "localhost", "[::1]"
+  int port = 0;           // 0..65535; 0 = let the system choose (ephemeral port)
+  bool loopback = false;  // host is only reachable from this machine (127.0.0.0/8, ::1, localhost)
+};
+
+// Parses "HOST:PORT" where HOST is an IPv4 address, a bracketed IPv6 address or a DNS name.
+// Host names other than "localhost" count as remote (they may resolve to any interface).
+StatusOr<ListenAddress> parseListenAddress(const std::string& address);
+
+struct ServerOptions {
+  // Where to listen, HOST:PORT; port 0 picks a free port (see ObjdbServer::port()).
+  std::string listen_address = "127.0.0.1:50051";
+  // Without authentication (a later issue) only loopback addresses are accepted unless this is
+  // set: anyone who can reach the port can read and write the database.
+  bool allow_remote = false;
+  // SQLite database file; created if missing. Not opened yet: storage lands in a later issue.
+  std::string db_path = "objdb.sqlite";
+  // Largest message accepted / sent, bytes (gRPC's default receive limit of 4 MiB is below one
+  // 1280×720 depth + colour frame). Larger messages fail with RESOURCE_EXHAUSTED.
+  int max_receive_message_bytes = 16 * 1024 * 1024;
+  int max_send_message_bytes = 16 * 1024 * 1024;
+  // On shutdown, in-flight calls get this long to finish before they are cancelled.
+  std::chrono::milliseconds drain_deadline{10000};
+  // Pipeline parameters (the --config file); sessions may override them.
+  Params params;
+
+  // Checks every field; the message names the field and the bad value.
+  Status validate() const;
+};
+
+// Health-check name of the API service (its health is NOT_SERVING until the RPCs are implemented).
+inline constexpr char kObjectDatabaseServiceName[] = "objdb.v1.ObjectDatabase";
+
+// Bounds of ServerOptions, documented in the usage text.
+inline constexpr int kMinMessageBytes = 4 * 1024;
+inline constexpr int kMaxMessageBytes = 1024 * 1024 * 1024;
+inline constexpr std::chrono::milliseconds kMaxDrainDeadline{10 * 60 * 1000};
+
+// A running server. Thread-safe; shutdown() may be called from any thread, any number of times.
+class ObjdbServer {
+ public:
+  // Validates the options, binds the address and starts serving (health: SERVING).
+  // UNAVAILABLE when the address cannot be bound (in use, not a local interface, no permission).
+  static StatusOr<std::unique_ptr<ObjdbServer>> start(const ServerOptions& options);
+
+  ~ObjdbServer();  // shuts down (with the drain deadline) if still running
+  ObjdbServer(const ObjdbServer&) = delete;
+  ObjdbServer& operator=(const ObjdbServer&) = delete;
+
+  const ServerOptions& options() const { return options_; }
+  // The bound port: the requested one, or the one chosen by the system for port 0.
+  int port() const { return port_; }
+  // HOST:PORT actually listened on, e.g. "127.0.0.1:43121".
+  std::string address() const;
+
+  // Graceful stop: health turns NOT_SERVING, the listener closes, new calls are refused, calls in
+  // flight get options().drain_deadline to finish and are cancelled after it. Blocks until the
+  // server has stopped. Later calls return at once.
+  void shutdown();
+  bool stopped() const;
+
+ private:
+  ObjdbServer(ServerOptions options, std::unique_ptr<PendingObjectDatabaseService> service,
+              std::unique_ptr<grpc::Server> server, std::string host, int port);
+
+  const ServerOptions options_;
+  // Declared before server_: services must outlive the grpc::Server that calls them.
+  std::unique_ptr<PendingObjectDatabaseService> service_;
+  std::unique_ptr<grpc::Server> server_;
+  const std::string host_;
+  const int port_;
+  std::mutex mutex_;  // serialises shutdown()
+  std::atomic<bool> stopped_{false};
+};
+
+}  // namespace objdb

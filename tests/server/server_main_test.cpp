@@ -1,0 +1,257 @@
+// The objdb-server binary: usage, command-line errors, config checks, serving until SIGTERM/SIGINT.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <string.h>
+
+#include <cctype>
+#include <chrono>
+#include <memory>
+#include <string>
+
+#include "grpc/health/v1/health.grpc.pb.h"
+#include "tests/support/subprocess.h"
+#include "tests/support/temp_dir.h"
+
+namespace objdb {
+namespace {
+
+using testing::ChildProcess;
+using testing::ProcessResult;
+using testing::runProcess;
+using testing::TempDir;
+using testing::writeTextFile;
+
+constexpr auto kStartTimeout = std::chrono::seconds(30);
+const std::string kServer = OBJDB_SERVER_BINARY;
+constexpr const char* kListening = "listening on 127.0.0.1:";
+
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+grpc::Status checkHealth(const std::string& address,
+                         grpc::health::v1::HealthCheckResponse* response) {
+  auto stub = grpc::health::v1::Health::NewStub(
+      grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  return stub->Check(&context, grpc::health::v1::HealthCheckRequest(), response);
+}
+
+// "... listening on 127.0.0.1:43121" → "127.0.0.1:43121", or "" if absent.
+std::string listeningAddress(const std::string& log) {
+  const size_t at = log.find(kListening);
+  if (at == std::string::npos) return "";
+  size_t end = at + std::string(kListening).size();
+  while (end < log.size() && std::isdigit(static_cast<unsigned char>(log[end]))) ++end;
+  return log.substr(at + std::string("listening on ").size(),
+                    end - at - std::string("listening on ").size());
+}
+
+TEST(ObjdbServerBinary, HelpPrintsUsageAndExitsZero) {
+  for (const char* flag : {"--help", "-h"}) {
+    const ProcessResult result = runProcess({kServer, flag});
+    EXPECT_EQ(result.exit_code, 0) << flag << "\n" << result.err;
+    EXPECT_TRUE(contains(result.out, "usage: objdb-server")) << result.out;
+    for (const char* option : {"--listen", "--allow-remote", "--db", "--config", "--log-level",
+                               "--help", "127.0.0.1:50051", "objdb.sqlite"}) {
+      EXPECT_TRUE(contains(result.out, option)) << option;
+    }
+    EXPECT_EQ(result.err, "");
+  }
+}
+
+TEST(ObjdbServerBinary, UnknownOptionPrintsUsageAndExitsTwo) {
+  const ProcessResult result = runProcess({kServer, "--bogus"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "unknown option \"--bogus\"")) << result.err;
+  EXPECT_TRUE(contains(result.err, "usage: objdb-server")) << result.err;
+  EXPECT_EQ(result.out, "");
+}
+
+TEST(ObjdbServerBinary, MissingOrMalformedValuesExitTwo) {
+  ProcessResult result = runProcess({kServer, "--listen"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "--listen needs a value")) << result.err;
+
+  result = runProcess({kServer, "--drain-deadline-ms", "soon"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "--drain-deadline-ms must be an integer")) << result.err;
+
+  result = runProcess({kServer, "--max-message-mib=0"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "--max-message-mib must be an integer in [1, 1024]"))
+      << result.err;
+
+  result = runProcess({kServer, "--allow-remote=yes"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "--allow-remote takes no value")) << result.err;
+
+  result = runProcess({kServer, "--log-level", "loud"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "unknown --log-level \"loud\"")) << result.err;
+}
+
+TEST(ObjdbServerBinary, ConfigThatIsNotJsonRefusesToStartNamingTheFile) {
+  TempDir dir;
+  const std::string config = (dir / "broken.json").string();
+  ASSERT_TRUE(writeTextFile(config, "{\"tsdf\": {\"voxel_size_m\": 0.01"));
+  const ProcessResult result = runProcess({kServer, "--listen", "127.0.0.1:0", "--config", config});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, config)) << result.err;
+  EXPECT_TRUE(contains(result.err, "not valid JSON")) << result.err;
+  EXPECT_FALSE(contains(result.err, "listening on")) << result.err;
+}
+
+TEST(ObjdbServerBinary, ConfigWithUnknownKeyOrBadValueRefusesToStart) {
+  TempDir dir;
+  const std::string typo = (dir / "typo.json").string();
+  ASSERT_TRUE(writeTextFile(typo, R"({"tsdf": {"voxel_size": 0.01}})"));
+  ProcessResult result = runProcess({kServer, "--listen", "127.0.0.1:0", "--config", typo});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, typo)) << result.err;
+  EXPECT_TRUE(contains(result.err, "tsdf.voxel_size")) << result.err;
+
+  const std::string bad_value = (dir / "negative.json").string();
+  ASSERT_TRUE(writeTextFile(bad_value, R"({"tsdf": {"voxel_size_m": -1}})"));
+  result = runProcess({kServer, "--listen", "127.0.0.1:0", "--config", bad_value});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, bad_value)) << result.err;
+  EXPECT_TRUE(contains(result.err, "tsdf.voxel_size_m")) << result.err;
+}
+
+TEST(ObjdbServerBinary, MissingConfigFileRefusesToStart) {
+  TempDir dir;
+  const std::string missing = (dir / "missing.json").string();
+  const ProcessResult result = runProcess({kServer, "--config", missing});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, missing)) << result.err;
+}
+
+TEST(ObjdbServerBinary, PrintConfigShowsTheConfigFileApplied) {
+  TempDir dir;
+  const std::string config = (dir / "fine.json").string();
+  ASSERT_TRUE(writeTextFile(config, R"({"matching": {"k_nn": 8}})"));
+  const ProcessResult result = runProcess({kServer, "--config", config, "--print-config"});
+  EXPECT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_TRUE(contains(result.out, "\"k_nn\": 8")) << result.out;
+  EXPECT_TRUE(contains(result.out, "\"voxel_size_m\"")) << result.out;
+}
+
+TEST(ObjdbServerBinary, NonLoopbackAddressNeedsAllowRemote) {
+  const ProcessResult result = runProcess({kServer, "--listen", "0.0.0.0:0"});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, "0.0.0.0:0")) << result.err;
+  EXPECT_TRUE(contains(result.err, "--allow-remote")) << result.err;
+  EXPECT_FALSE(contains(result.err, "listening on")) << result.err;
+}
+
+TEST(ObjdbServerBinary, MalformedListenAddressRefusesToStart) {
+  const ProcessResult result = runProcess({kServer, "--listen=localhost"});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, "\"localhost\" has no port")) << result.err;
+}
+
+class ObjdbServerBinarySignal : public ::testing::TestWithParam<int> {};
+
+TEST_P(ObjdbServerBinarySignal, ServesHealthThenDrainsAndExitsZero) {
+  const int signal_number = GetParam();
+  TempDir dir;
+  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--db", (dir / "db.sqlite").string(),
+                       "--log-level", "debug"});
+  ASSERT_TRUE(server.started());
+  ASSERT_TRUE(server.waitForStderr(kListening, kStartTimeout)) << server.stderrText();
+  ASSERT_TRUE(server.waitForStderr("\n", kStartTimeout));
+  const std::string address = listeningAddress(server.stderrText());
+  ASSERT_NE(address, "127.0.0.1:") << server.stderrText();
+  ASSERT_NE(address, "127.0.0.1:0") << server.stderrText();
+
+  grpc::health::v1::HealthCheckResponse response;
+  const grpc::Status status = checkHealth(address, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message() << "\n" << server.stderrText();
+  EXPECT_EQ(response.status(), grpc::health::v1::HealthCheckResponse::SERVING);
+
+  ASSERT_TRUE(server.sendSignal(signal_number));
+  const ProcessResult result = server.wait(std::chrono::seconds(60));
+  EXPECT_FALSE(result.timed_out);
+  EXPECT_EQ(result.term_signal, 0) << result.err;
+  EXPECT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_TRUE(contains(result.err, "received SIG" + std::string(sigabbrev_np(signal_number))))
+      << result.err;
+  EXPECT_TRUE(contains(result.err, "stopped serving " + address)) << result.err;
+  EXPECT_EQ(checkHealth(address, &response).error_code(), grpc::StatusCode::UNAVAILABLE);
+}
+
+// Starts objdb-server on an ephemeral port and returns its address ("" on failure).
+std::string startServer(ChildProcess* server) {
+  if (!server->started() || !server->waitForStderr(kListening, kStartTimeout) ||
+      !server->waitForStderr("\n", kStartTimeout)) {
+    return "";
+  }
+  return listeningAddress(server->stderrText());
+}
+
+// A health Watch keeps a call in flight, so the drain has something to wait for.
+struct OpenWatch {
+  explicit OpenWatch(const std::string& address)
+      : stub(grpc::health::v1::Health::NewStub(
+            grpc::CreateChannel(address, grpc::InsecureChannelCredentials()))) {
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    reader = stub->Watch(&context, grpc::health::v1::HealthCheckRequest());
+  }
+  std::unique_ptr<grpc::health::v1::Health::Stub> stub;
+  grpc::ClientContext context;
+  std::unique_ptr<grpc::ClientReader<grpc::health::v1::HealthCheckResponse>> reader;
+};
+
+TEST(ObjdbServerBinary, CallStillOpenAtTheDrainDeadlineIsCancelledAndTheServerExitsZero) {
+  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--drain-deadline-ms", "300"});
+  const std::string address = startServer(&server);
+  ASSERT_FALSE(address.empty()) << server.stderrText();
+  OpenWatch watch(address);
+  grpc::health::v1::HealthCheckResponse response;
+  ASSERT_TRUE(watch.reader->Read(&response));
+  EXPECT_EQ(response.status(), grpc::health::v1::HealthCheckResponse::SERVING);
+
+  ASSERT_TRUE(server.sendSignal(SIGTERM));
+  ASSERT_TRUE(watch.reader->Read(&response));
+  EXPECT_EQ(response.status(), grpc::health::v1::HealthCheckResponse::NOT_SERVING);
+  while (watch.reader->Read(&response)) {
+  }
+  const grpc::Status ended = watch.reader->Finish();
+  // gRPC ends calls still running at the Shutdown deadline with UNAVAILABLE.
+  EXPECT_EQ(ended.error_code(), grpc::StatusCode::UNAVAILABLE) << ended.error_message();
+  const ProcessResult result = server.wait(std::chrono::seconds(60));
+  EXPECT_EQ(result.exit_code, 0) << result.err;
+  EXPECT_TRUE(contains(result.err, "stopped serving")) << result.err;
+}
+
+TEST(ObjdbServerBinary, SecondSignalExitsAtOnceDuringADrain) {
+  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--drain-deadline-ms", "600000"});
+  const std::string address = startServer(&server);
+  ASSERT_FALSE(address.empty()) << server.stderrText();
+  OpenWatch watch(address);
+  grpc::health::v1::HealthCheckResponse response;
+  ASSERT_TRUE(watch.reader->Read(&response));
+
+  ASSERT_TRUE(server.sendSignal(SIGTERM));
+  // Standard signals do not queue: wait until the first one was taken before sending another.
+  ASSERT_TRUE(server.waitForStderr("received SIGTERM", kStartTimeout)) << server.stderrText();
+  ASSERT_TRUE(server.sendSignal(SIGTERM));
+  const ProcessResult result = server.wait(std::chrono::seconds(60));
+  EXPECT_FALSE(result.timed_out);
+  EXPECT_EQ(result.exit_code, 128 + SIGTERM) << result.err;
+  EXPECT_TRUE(contains(result.err, "received SIGTERM again, exiting without draining"))
+      << result.err;
+  watch.context.TryCancel();
+}
+
+INSTANTIATE_TEST_SUITE_P(SigtermAndSigint, ObjdbServerBinarySignal,
+                         ::testing::Values(SIGTERM, SIGINT),
+                         [](const ::testing::TestParamInfo<int>& info) {
+                           return std::string(sigabbrev_np(info.param));
+                         });
+
+}  // namespace
+}  // namespace objdb

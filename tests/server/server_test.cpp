@@ -1,0 +1,356 @@
+// ObjdbServer over loopback (ephemeral ports): health, UNIMPLEMENTED API, limits, shutdown; and
+// the ServerOptions / listen-address policy.
+#include "server/server.h"
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "grpc/health/v1/health.grpc.pb.h"
+#include "objdb/v1/objdb.grpc.pb.h"
+#include "server/pending_object_database.h"
+
+namespace objdb {
+namespace {
+
+using grpc::health::v1::Health;
+using grpc::health::v1::HealthCheckRequest;
+using grpc::health::v1::HealthCheckResponse;
+
+constexpr auto kCallDeadline = std::chrono::seconds(10);
+
+ServerOptions loopbackOptions() {
+  ServerOptions options;
+  options.listen_address = "127.0.0.1:0";
+  options.drain_deadline = std::chrono::seconds(30);
+  return options;
+}
+
+std::unique_ptr<ObjdbServer> startOrDie(const ServerOptions& options) {
+  StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
+  EXPECT_TRUE(server.ok()) << server.status();
+  return server.ok() ? *std::move(server) : nullptr;
+}
+
+std::shared_ptr<grpc::Channel> channelTo(const std::string& address) {
+  return grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
+}
+
+void setDeadline(grpc::ClientContext* context) {
+  context->set_deadline(std::chrono::system_clock::now() + kCallDeadline);
+}
+
+grpc::Status checkHealth(const std::string& address, const std::string& service,
+                         HealthCheckResponse* response) {
+  auto stub = Health::NewStub(channelTo(address));
+  grpc::ClientContext context;
+  setDeadline(&context);
+  HealthCheckRequest request;
+  request.set_service(service);
+  return stub->Check(&context, request, response);
+}
+
+TEST(ObjdbServer, StartsOnEphemeralLoopbackPortAndReportsServing) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  EXPECT_GT(server->port(), 0);
+  EXPECT_LE(server->port(), 65535);
+  EXPECT_EQ(server->address(), "127.0.0.1:" + std::to_string(server->port()));
+  EXPECT_FALSE(server->stopped());
+
+  HealthCheckResponse response;
+  const grpc::Status status = checkHealth(server->address(), "", &response);
+  ASSERT_TRUE(status.ok()) << status.error_code() << ": " << status.error_message();
+  EXPECT_EQ(response.status(), HealthCheckResponse::SERVING);
+}
+
+TEST(ObjdbServer, HealthOfTheApiServiceIsNotServingUntilItsRpcsExist) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  HealthCheckResponse response;
+  const grpc::Status status = checkHealth(server->address(), kObjectDatabaseServiceName, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(response.status(), HealthCheckResponse::NOT_SERVING);
+}
+
+TEST(ObjdbServer, HealthOfAnUnknownServiceIsNotFound) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  HealthCheckResponse response;
+  const grpc::Status status = checkHealth(server->address(), "no.such.Service", &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND) << status.error_message();
+}
+
+// The ObjectDatabase RPCs come with their issues; until then every one of them must answer
+// UNIMPLEMENTED naming itself and what it waits for, never fake data.
+void expectPending(const grpc::Status& status, const std::string& method) {
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNIMPLEMENTED) << method;
+  EXPECT_EQ(status.error_message(), pendingRpcMessage(method));
+  EXPECT_NE(status.error_message().find("objdb.v1.ObjectDatabase/" + method +
+                                        " is not implemented yet; it waits for "),
+            std::string::npos)
+      << status.error_message();
+}
+
+TEST(ObjdbServer, ObjectDatabaseRpcsAreUnimplementedUntilTheirIssuesLand) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::ObjectDatabase::NewStub(channelTo(server->address()));
+
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetStatsResponse response;
+    expectPending(stub->GetStats(&context, v1::GetStatsRequest(), &response), "GetStats");
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::ListObjectsResponse response;
+    expectPending(stub->ListObjects(&context, v1::ListObjectsRequest(), &response), "ListObjects");
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::ListSessionsResponse response;
+    expectPending(stub->ListSessions(&context, v1::ListSessionsRequest(), &response),
+                  "ListSessions");
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetObjectRequest request;
+    request.set_id(1);
+    v1::ObjectDetail response;
+    expectPending(stub->GetObject(&context, request, &response), "GetObject");
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::EndSessionRequest request;
+    request.set_session_name("s");
+    v1::EndSessionResponse response;
+    expectPending(stub->EndSession(&context, request, &response), "EndSession");
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetSceneMeshRequest request;
+    request.set_session_name("s");
+    auto reader = stub->GetSceneMesh(&context, request);
+    v1::MeshChunk chunk;
+    EXPECT_FALSE(reader->Read(&chunk));
+    expectPending(reader->Finish(), "GetSceneMesh");
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    auto stream = stub->Ingest(&context);
+    v1::IngestRequest request;
+    request.mutable_header()->set_session_name("s");
+    stream->Write(request);  // may fail once the server has answered; the status tells why
+    stream->WritesDone();
+    v1::IngestResponse response;
+    EXPECT_FALSE(stream->Read(&response));
+    expectPending(stream->Finish(), "Ingest");
+  }
+}
+
+TEST(ObjdbServer, ShutdownStopsServingAndNewCallsFail) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  const std::string address = server->address();
+  HealthCheckResponse response;
+  ASSERT_TRUE(checkHealth(address, "", &response).ok());
+
+  server->shutdown();
+  EXPECT_TRUE(server->stopped());
+  const grpc::Status after = checkHealth(address, "", &response);
+  EXPECT_EQ(after.error_code(), grpc::StatusCode::UNAVAILABLE) << after.error_message();
+  server->shutdown();  // a second call returns at once
+  EXPECT_TRUE(server->stopped());
+}
+
+// A health Watch open when the drain starts sees NOT_SERVING, and the drain waits for that call
+// until the client ends it (the drain deadline here is far away).
+TEST(ObjdbServer, WatchSeesNotServingWhenTheDrainStarts) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = Health::NewStub(channelTo(server->address()));
+  grpc::ClientContext context;
+  setDeadline(&context);
+  auto reader = stub->Watch(&context, HealthCheckRequest());
+  HealthCheckResponse response;
+  ASSERT_TRUE(reader->Read(&response));
+  EXPECT_EQ(response.status(), HealthCheckResponse::SERVING);
+
+  std::thread stopper([&server] { server->shutdown(); });
+  ASSERT_TRUE(reader->Read(&response));
+  EXPECT_EQ(response.status(), HealthCheckResponse::NOT_SERVING);
+  context.TryCancel();
+  while (reader->Read(&response)) {
+  }
+  reader->Finish();
+  stopper.join();
+  EXPECT_TRUE(server->stopped());
+}
+
+TEST(ObjdbServer, SecondServerOnABusyPortFailsWithUnavailable) {
+  auto first = startOrDie(loopbackOptions());
+  ASSERT_NE(first, nullptr);
+  ServerOptions options = loopbackOptions();
+  options.listen_address = first->address();
+  StatusOr<std::unique_ptr<ObjdbServer>> second = ObjdbServer::start(options);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(second.status().message().find(first->address()), absl::string_view::npos)
+      << second.status();
+  // The first server is unaffected.
+  HealthCheckResponse response;
+  EXPECT_TRUE(checkHealth(first->address(), "", &response).ok());
+}
+
+TEST(ObjdbServer, StartRejectsInvalidOptions) {
+  ServerOptions options = loopbackOptions();
+  options.max_receive_message_bytes = 0;
+  StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
+  ASSERT_FALSE(server.ok());
+  EXPECT_EQ(server.status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(ObjdbServer, MessageAboveTheReceiveLimitIsResourceExhaustedAndServerCarriesOn) {
+  ServerOptions options = loopbackOptions();
+  options.max_receive_message_bytes = kMinMessageBytes;
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  HealthCheckResponse response;
+  const grpc::Status big =
+      checkHealth(server->address(), std::string(kMinMessageBytes + 1, 'x'), &response);
+  EXPECT_EQ(big.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << big.error_message();
+  const grpc::Status small = checkHealth(server->address(), "", &response);
+  ASSERT_TRUE(small.ok()) << small.error_message();
+  EXPECT_EQ(response.status(), HealthCheckResponse::SERVING);
+}
+
+TEST(ServerOptions, DefaultsAreValidAndMatchTheDocumentation) {
+  const ServerOptions options;
+  EXPECT_TRUE(options.validate().ok()) << options.validate();
+  EXPECT_EQ(options.listen_address, "127.0.0.1:50051");
+  EXPECT_FALSE(options.allow_remote);
+  EXPECT_EQ(options.db_path, "objdb.sqlite");
+  EXPECT_EQ(options.max_receive_message_bytes, 16 * 1024 * 1024);
+  EXPECT_EQ(options.max_send_message_bytes, 16 * 1024 * 1024);
+  EXPECT_EQ(options.drain_deadline, std::chrono::seconds(10));
+}
+
+TEST(ServerOptions, ParsesLoopbackAddresses) {
+  struct Case {
+    std::string address, host;
+    int port;
+  };
+  for (const Case& c :
+       {Case{"127.0.0.1:0", "127.0.0.1", 0}, Case{"127.8.9.10:65535", "127.8.9.10", 65535},
+        Case{"localhost:50051", "localhost", 50051}, Case{"LocalHost:1", "LocalHost", 1},
+        Case{"[::1]:50051", "[::1]", 50051},
+        Case{"[::ffff:127.0.0.1]:7", "[::ffff:127.0.0.1]", 7}}) {
+    StatusOr<ListenAddress> parsed = parseListenAddress(c.address);
+    ASSERT_TRUE(parsed.ok()) << c.address << ": " << parsed.status();
+    EXPECT_EQ(parsed->host, c.host) << c.address;
+    EXPECT_EQ(parsed->port, c.port) << c.address;
+    EXPECT_TRUE(parsed->loopback) << c.address;
+  }
+}
+
+TEST(ServerOptions, ParsesRemoteAddressesAsNotLoopback) {
+  for (const std::string address :
+       {"0.0.0.0:50051", "[::]:50051", "192.168.1.20:1", "10.0.0.1:80", "[2001:db8::1]:9",
+        "objdb.example.com:443", "[::ffff:10.0.0.1]:1"}) {
+    StatusOr<ListenAddress> parsed = parseListenAddress(address);
+    ASSERT_TRUE(parsed.ok()) << address << ": " << parsed.status();
+    EXPECT_FALSE(parsed->loopback) << address;
+  }
+}
+
+TEST(ServerOptions, RejectsMalformedAddressesNamingThem) {
+  for (const std::string address :
+       {"", "127.0.0.1", "127.0.0.1:", ":50051", "127.0.0.1:65536", "127.0.0.1:123456",
+        "127.0.0.1:-1", "127.0.0.1:5x", "127.0.0.1: 1", "256.0.0.1:1", "127.1:1", "::1:50051",
+        "[::1:50051", "[zz]:1", "[]:1", "bad_host:1", "-host:1", "host..name:1",
+        "unix:/tmp/objdb.sock"}) {
+    ServerOptions options;
+    options.listen_address = address;
+    const Status status = options.validate();
+    ASSERT_FALSE(status.ok()) << "accepted \"" << address << "\"";
+    EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << address;
+    EXPECT_NE(status.message().find("listen_address"), absl::string_view::npos) << status;
+    EXPECT_NE(status.message().find("\"" + address + "\""), absl::string_view::npos) << status;
+  }
+}
+
+TEST(ServerOptions, NonLoopbackAddressNeedsAllowRemote) {
+  for (const std::string address : {"0.0.0.0:50051", "[::]:1", "192.168.1.20:1", "myhost:1"}) {
+    ServerOptions options;
+    options.listen_address = address;
+    const Status refused = options.validate();
+    ASSERT_FALSE(refused.ok()) << address;
+    EXPECT_EQ(refused.code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_NE(refused.message().find(address), absl::string_view::npos) << refused;
+    EXPECT_NE(refused.message().find("allow_remote"), absl::string_view::npos) << refused;
+    options.allow_remote = true;
+    EXPECT_TRUE(options.validate().ok()) << address << ": " << options.validate();
+  }
+}
+
+TEST(ServerOptions, RejectsZeroNegativeAndHugeMessageSizes) {
+  for (const int bytes : {0, -1, kMinMessageBytes - 1, kMaxMessageBytes + 1}) {
+    ServerOptions receive;
+    receive.max_receive_message_bytes = bytes;
+    const Status r = receive.validate();
+    EXPECT_EQ(r.code(), absl::StatusCode::kInvalidArgument) << bytes;
+    EXPECT_NE(r.message().find("max_receive_message_bytes is " + std::to_string(bytes)),
+              absl::string_view::npos)
+        << r;
+    ServerOptions send;
+    send.max_send_message_bytes = bytes;
+    const Status s = send.validate();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << bytes;
+    EXPECT_NE(s.message().find("max_send_message_bytes is " + std::to_string(bytes)),
+              absl::string_view::npos)
+        << s;
+  }
+  ServerOptions edge;
+  edge.max_receive_message_bytes = kMinMessageBytes;
+  edge.max_send_message_bytes = kMaxMessageBytes;
+  EXPECT_TRUE(edge.validate().ok()) << edge.validate();
+}
+
+TEST(ServerOptions, RejectsNegativeOrHugeDrainDeadline) {
+  ServerOptions options;
+  options.drain_deadline = std::chrono::milliseconds(-1);
+  EXPECT_NE(options.validate().message().find("drain_deadline is -1 ms"), absl::string_view::npos)
+      << options.validate();
+  options.drain_deadline = kMaxDrainDeadline + std::chrono::milliseconds(1);
+  EXPECT_EQ(options.validate().code(), absl::StatusCode::kInvalidArgument);
+  options.drain_deadline = std::chrono::milliseconds(0);
+  EXPECT_TRUE(options.validate().ok());
+}
+
+TEST(ServerOptions, RejectsEmptyDbPathAndInvalidParams) {
+  ServerOptions no_db;
+  no_db.db_path = "";
+  EXPECT_NE(no_db.validate().message().find("db_path"), absl::string_view::npos);
+
+  ServerOptions bad_params;
+  bad_params.params.tsdf.voxel_size_m = -0.01f;
+  const Status status = bad_params.validate();
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(status.message().find("params"), absl::string_view::npos) << status;
+  EXPECT_NE(status.message().find("voxel_size_m"), absl::string_view::npos) << status;
+}
+
+}  // namespace
+}  // namespace objdb
