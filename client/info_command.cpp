@@ -130,16 +130,22 @@ int describeCollection(const fs::path& root, bool visibility, int min_pixels) {
     try {
       std::ifstream in(index);
       const auto j = nlohmann::json::parse(in);
-      std::map<std::string, int> per_kind;
+      std::map<std::string, int> per_kind, structure;
       int n = 0;
       for (const auto& o : j.at("objects")) {
-        if (o.value("structure", false)) continue;
+        const auto kind = o.at("category").get<std::string>();
+        if (o.value("structure", false)) {
+          ++structure[kind];
+          continue;
+        }
         ++n;
-        ++per_kind[o.at("category").get<std::string>()];
+        ++per_kind[kind];
       }
       std::printf("%s: %zu sessions, %d objects of %zu kinds:", root.string().c_str(),
                   sessions.size(), n, per_kind.size());
       for (const auto& [kind, count] : per_kind) std::printf(" %s %d,", kind.c_str(), count);
+      std::printf(" and structure:");
+      for (const auto& [kind, count] : structure) std::printf(" %s %d,", kind.c_str(), count);
       std::printf("\n\n");
     } catch (const std::exception& e) {
       std::fprintf(stderr, "objdb info: %s: %s\n", index.string().c_str(), e.what());

@@ -2,6 +2,7 @@
 // the wire carry) or float metres (what algorithms use); 0 or NaN metres means "no measurement".
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
 

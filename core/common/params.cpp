@@ -19,6 +19,10 @@ Status inRange(double v, double lo, double hi, absl::string_view field) {
 }  // namespace
 
 Status SegmentationParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(
+      inRange(fill_holes_iterations, 0, 20, "segmentation.fill_holes_iterations"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(label_growth_iterations, 0, 50, "segmentation.label_growth_iterations"));
   OBJDB_RETURN_IF_ERROR(inRange(normal_window_px, 3, 51, "segmentation.normal_window_px"));
   if (normal_window_px % 2 == 0) {
     return absl::InvalidArgumentError(absl::StrFormat(

@@ -10,8 +10,10 @@
 
 namespace objdb {
 
-// §III-A depth segmentation (defaults of ethz-asl depth_segmentation at VGA).
+// §III-A depth segmentation (defaults of ethz-asl depth_segmentation at VGA). Window sizes and
+// the minimum segment size are given for 640×480 and scaled to other resolutions.
 struct SegmentationParams {
+  int fill_holes_iterations = 0;              // 3×3 hole-filling passes (0 = off, sensor dependent)
   int normal_window_px = 13;                  // side of the normal-estimation window
   float normal_max_relative_distance = 0.05f; // neighbours used only if |Δz| < this · z
   int discontinuity_window_px = 3;            // kernel of the depth-discontinuity filter
@@ -21,6 +23,7 @@ struct SegmentationParams {
   float convexity_offset_m = 0.0005f;         // offsets above −this along the normal are convex
   int min_segment_px = 500;                   // smaller regions are dropped (VGA; scale for others)
   float max_label_growth_distance_m = 0.05f;  // edge pixels join a neighbour label within this
+  int label_growth_iterations = 4;            // passes of growing labels into edge pixels
   Status validate() const;
 };
 

@@ -13,6 +13,7 @@ using nlohmann::json;
 // Field table per struct: one place that lists every configurable field by its JSON name.
 template <typename Fn>
 void forEachField(SegmentationParams& p, Fn&& fn) {
+  fn("fill_holes_iterations", p.fill_holes_iterations);
   fn("normal_window_px", p.normal_window_px);
   fn("normal_max_relative_distance", p.normal_max_relative_distance);
   fn("discontinuity_window_px", p.discontinuity_window_px);
@@ -22,6 +23,7 @@ void forEachField(SegmentationParams& p, Fn&& fn) {
   fn("convexity_offset_m", p.convexity_offset_m);
   fn("min_segment_px", p.min_segment_px);
   fn("max_label_growth_distance_m", p.max_label_growth_distance_m);
+  fn("label_growth_iterations", p.label_growth_iterations);
 }
 template <typename Fn>
 void forEachField(TsdfParams& p, Fn&& fn) {

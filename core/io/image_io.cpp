@@ -20,10 +20,10 @@ enum class FileFormat { kPng, kJpeg, kOther };
 // What the file header says, read before OpenCV decodes (and allocates) anything.
 struct HeaderInfo {
   FileFormat format = FileFormat::kOther;
-  int64_t width = -1;   // -1 when the header did not say
+  int64_t width = -1;  // -1 when the header did not say
   int64_t height = -1;
-  int bit_depth = -1;   // PNG only
-  int channels = -1;    // PNG only: from the colour type (palette counts as 3)
+  int bit_depth = -1;  // PNG only
+  int channels = -1;   // PNG only: from the colour type (palette counts as 3)
 };
 
 uint32_t bigEndian32(const unsigned char* p) {
@@ -46,8 +46,8 @@ void scanJpegHeader(std::ifstream& in, HeaderInfo* info) {
     if (!in.read(reinterpret_cast<char*>(length_bytes), 2)) return;
     const int length = (length_bytes[0] << 8) | length_bytes[1];
     if (length < 2) return;
-    const bool is_sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 &&
-                        marker != 0xCC;
+    const bool is_sof =
+        marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
     if (is_sof) {
       unsigned char sof[5];
       if (length < 7 || !in.read(reinterpret_cast<char*>(sof), 5)) return;
@@ -88,14 +88,24 @@ StatusOr<HeaderInfo> readHeader(const fs::path& path) {
     info.height = bigEndian32(head.data() + 20);
     info.bit_depth = head[24];
     switch (head[25]) {
-      case 0: info.channels = 1; break;
-      case 2: info.channels = 3; break;
-      case 3: info.channels = 3; break;
-      case 4: info.channels = 2; break;
-      case 6: info.channels = 4; break;
+      case 0:
+        info.channels = 1;
+        break;
+      case 2:
+        info.channels = 3;
+        break;
+      case 3:
+        info.channels = 3;
+        break;
+      case 4:
+        info.channels = 2;
+        break;
+      case 6:
+        info.channels = 4;
+        break;
       default:
-        return absl::InvalidArgumentError(absl::StrFormat(
-            "%s has an invalid PNG colour type %d", path.string(), int(head[25])));
+        return absl::InvalidArgumentError(
+            absl::StrFormat("%s has an invalid PNG colour type %d", path.string(), int(head[25])));
     }
   } else if (got >= 3 && head[0] == 0xFF && head[1] == 0xD8 && head[2] == 0xFF) {
     info.format = FileFormat::kJpeg;
@@ -110,9 +120,9 @@ Status checkHeaderSize(const fs::path& path, const HeaderInfo& info) {
       info.height <= kMaxImageSide) {
     return absl::OkStatus();
   }
-  return absl::InvalidArgumentError(
-      absl::StrFormat("%s is %dx%d pixels; expected 1..%d per side", path.string(), info.width,
-                      info.height, kMaxImageSide));
+  return absl::InvalidArgumentError(absl::StrFormat("%s is %dx%d pixels; expected 1..%d per side",
+                                                    path.string(), info.width, info.height,
+                                                    kMaxImageSide));
 }
 
 StatusOr<cv::Mat> decode(const fs::path& path) {
@@ -129,23 +139,31 @@ StatusOr<cv::Mat> decode(const fs::path& path) {
   }
   if (!(mat.dims == 2 && mat.cols >= 1 && mat.cols <= kMaxImageSide && mat.rows >= 1 &&
         mat.rows <= kMaxImageSide)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "%s is %dx%d pixels; expected 1..%d per side", path.string(), mat.cols, mat.rows,
-        kMaxImageSide));
+    return absl::InvalidArgumentError(absl::StrFormat("%s is %dx%d pixels; expected 1..%d per side",
+                                                      path.string(), mat.cols, mat.rows,
+                                                      kMaxImageSide));
   }
   return mat;
 }
 
 const char* depthName(int cv_depth) {
   switch (cv_depth) {
-    case CV_8U: return "8-bit";
-    case CV_8S: return "8-bit signed";
-    case CV_16U: return "16-bit";
-    case CV_16S: return "16-bit signed";
-    case CV_32S: return "32-bit integer";
-    case CV_32F: return "32-bit float";
-    case CV_64F: return "64-bit float";
-    default: return "of unknown depth";
+    case CV_8U:
+      return "8-bit";
+    case CV_8S:
+      return "8-bit signed";
+    case CV_16U:
+      return "16-bit";
+    case CV_16S:
+      return "16-bit signed";
+    case CV_32S:
+      return "32-bit integer";
+    case CV_32F:
+      return "32-bit float";
+    case CV_64F:
+      return "64-bit float";
+    default:
+      return "of unknown depth";
   }
 }
 
@@ -159,14 +177,14 @@ Status checkImageForWrite(const fs::path& path, int width, int height, size_t pi
         absl::StrCat("cannot write ", path.string(), ": the name must end in .png"));
   }
   if (!(width >= 1 && width <= kMaxImageSide && height >= 1 && height <= kMaxImageSide)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "cannot write %s: image is %dx%d; expected 1..%d per side", path.string(), width, height,
-        kMaxImageSide));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("cannot write %s: image is %dx%d; expected 1..%d per side", path.string(),
+                        width, height, kMaxImageSide));
   }
   if (pixels != size_t(width) * size_t(height)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "cannot write %s: image is %dx%d but holds %d pixels", path.string(), width, height,
-        pixels));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("cannot write %s: image is %dx%d but holds %d pixels", path.string(), width,
+                        height, pixels));
   }
   return absl::OkStatus();
 }
@@ -199,9 +217,8 @@ StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
         "%s is %d-bit; expected 16-bit single channel", path.string(), header.bit_depth));
   }
   if (header.channels != 1) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("%s has %d channels; expected 16-bit single channel", path.string(),
-                        header.channels));
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s has %d channels; expected 16-bit single channel", path.string(), header.channels));
   }
   OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(path));
   if (mat.depth() != CV_16U || mat.channels() != 1) {
@@ -218,8 +235,7 @@ StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
 
 Status writeUint16Png(const fs::path& path, const Image<uint16_t>& image) {
   OBJDB_RETURN_IF_ERROR(checkImageForWrite(path, image.width, image.height, image.data.size()));
-  const cv::Mat mat(image.height, image.width, CV_16UC1,
-                    const_cast<uint16_t*>(image.data.data()));
+  const cv::Mat mat(image.height, image.width, CV_16UC1, const_cast<uint16_t*>(image.data.data()));
   return encodeAndWrite(path, mat);
 }
 
@@ -236,8 +252,8 @@ StatusOr<ColorImage> readColorImage(const fs::path& path) {
   }
   OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(path));
   if (mat.depth() != CV_8U) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "%s is %s; expected an 8-bit colour image", path.string(), depthName(mat.depth())));
+    return absl::InvalidArgumentError(absl::StrFormat("%s is %s; expected an 8-bit colour image",
+                                                      path.string(), depthName(mat.depth())));
   }
   const int channels = mat.channels();
   if (channels != 3 && channels != 1) {

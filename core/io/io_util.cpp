@@ -27,8 +27,8 @@ StatusOr<std::string> readFile(const fs::path& path) {
         absl::StrCat("cannot read the size of ", path.string(), ": ", ec.message()));
   }
   if (!(size <= kMaxFileBytes)) {
-    return absl::InvalidArgumentError(absl::StrFormat("%s is %d bytes; the limit is %d",
-                                                      path.string(), size, kMaxFileBytes));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s is %d bytes; the limit is %d", path.string(), size, kMaxFileBytes));
   }
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::UnavailableError(absl::StrCat("cannot open ", path.string()));
@@ -41,8 +41,8 @@ StatusOr<std::string> readFile(const fs::path& path) {
   }
   in.read(data.data(), static_cast<std::streamsize>(size));
   if (static_cast<uint64_t>(in.gcount()) != size) {
-    return absl::DataLossError(absl::StrFormat("%s: read %d of %d bytes", path.string(),
-                                               in.gcount(), size));
+    return absl::DataLossError(
+        absl::StrFormat("%s: read %d of %d bytes", path.string(), in.gcount(), size));
   }
   return data;
 }
@@ -192,12 +192,11 @@ namespace {
 Status readJsonInt(const json& object, const std::string& key, const fs::path& path, int* out) {
   const auto it = object.find(key);
   if (it == object.end()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path.string(), ": missing key '", key, "'"));
+    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": missing key '", key, "'"));
   }
   if (!it->is_number_integer()) {
-    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": key '", key,
-                                                   "' must be an integer (got ", it->dump(), ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(path.string(), ": key '", key, "' must be an integer (got ", it->dump(), ")"));
   }
   const int64_t v = it->get<int64_t>();
   if (!(v >= 0 && v <= kMaxImageSide)) {
@@ -212,12 +211,11 @@ Status readJsonDouble(const json& object, const std::string& key, const fs::path
                       double* out) {
   const auto it = object.find(key);
   if (it == object.end()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(path.string(), ": missing key '", key, "'"));
+    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": missing key '", key, "'"));
   }
   if (!it->is_number()) {
-    return absl::InvalidArgumentError(absl::StrCat(path.string(), ": key '", key,
-                                                   "' must be a number (got ", it->dump(), ")"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(path.string(), ": key '", key, "' must be a number (got ", it->dump(), ")"));
   }
   *out = it->get<double>();
   return absl::OkStatus();
@@ -235,10 +233,9 @@ StatusOr<IntrinsicsFile> readIntrinsicsFile(const fs::path& path, absl::string_v
     const bool known = key == "width" || key == "height" || key == "fx" || key == "fy" ||
                        key == "cx" || key == "cy" || key == scale;
     if (!known && !value.is_string()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(path.string(), ": unknown key '", key,
-                       "' (known: width, height, fx, fy, cx, cy, ", scale,
-                       "; other keys may only hold text)"));
+      return absl::InvalidArgumentError(absl::StrCat(path.string(), ": unknown key '", key,
+                                                     "' (known: width, height, fx, fy, cx, cy, ",
+                                                     scale, "; other keys may only hold text)"));
     }
   }
   IntrinsicsFile file;

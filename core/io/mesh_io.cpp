@@ -36,11 +36,11 @@ enum class PlyFormat { kAscii, kBinaryLittleEndian, kBinaryBigEndian };
 
 bool parsePlyType(absl::string_view name, PlyType* type) {
   static const std::pair<const char*, PlyType> kNames[] = {
-      {"char", PlyType::kInt8},     {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
-      {"uint8", PlyType::kUint8},   {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
-      {"ushort", PlyType::kUint16}, {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
-      {"int32", PlyType::kInt32},   {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
-      {"float", PlyType::kFloat32}, {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
+      {"char", PlyType::kInt8},      {"int8", PlyType::kInt8},       {"uchar", PlyType::kUint8},
+      {"uint8", PlyType::kUint8},    {"short", PlyType::kInt16},     {"int16", PlyType::kInt16},
+      {"ushort", PlyType::kUint16},  {"uint16", PlyType::kUint16},   {"int", PlyType::kInt32},
+      {"int32", PlyType::kInt32},    {"uint", PlyType::kUint32},     {"uint32", PlyType::kUint32},
+      {"float", PlyType::kFloat32},  {"float32", PlyType::kFloat32}, {"double", PlyType::kFloat64},
       {"float64", PlyType::kFloat64}};
   for (const auto& [n, t] : kNames) {
     if (name == n) {
@@ -54,13 +54,17 @@ bool parsePlyType(absl::string_view name, PlyType* type) {
 size_t typeSize(PlyType type) {
   switch (type) {
     case PlyType::kInt8:
-    case PlyType::kUint8: return 1;
+    case PlyType::kUint8:
+      return 1;
     case PlyType::kInt16:
-    case PlyType::kUint16: return 2;
+    case PlyType::kUint16:
+      return 2;
     case PlyType::kInt32:
     case PlyType::kUint32:
-    case PlyType::kFloat32: return 4;
-    case PlyType::kFloat64: return 8;
+    case PlyType::kFloat32:
+      return 4;
+    case PlyType::kFloat64:
+      return 8;
   }
   return 1;
 }
@@ -69,13 +73,34 @@ bool isIntegerType(PlyType type) { return type != PlyType::kFloat32 && type != P
 
 void integerRange(PlyType type, double* lo, double* hi) {
   switch (type) {
-    case PlyType::kInt8: *lo = -128; *hi = 127; return;
-    case PlyType::kUint8: *lo = 0; *hi = 255; return;
-    case PlyType::kInt16: *lo = -32768; *hi = 32767; return;
-    case PlyType::kUint16: *lo = 0; *hi = 65535; return;
-    case PlyType::kInt32: *lo = -2147483648.0; *hi = 2147483647.0; return;
-    case PlyType::kUint32: *lo = 0; *hi = 4294967295.0; return;
-    default: *lo = -HUGE_VAL; *hi = HUGE_VAL; return;
+    case PlyType::kInt8:
+      *lo = -128;
+      *hi = 127;
+      return;
+    case PlyType::kUint8:
+      *lo = 0;
+      *hi = 255;
+      return;
+    case PlyType::kInt16:
+      *lo = -32768;
+      *hi = 32767;
+      return;
+    case PlyType::kUint16:
+      *lo = 0;
+      *hi = 65535;
+      return;
+    case PlyType::kInt32:
+      *lo = -2147483648.0;
+      *hi = 2147483647.0;
+      return;
+    case PlyType::kUint32:
+      *lo = 0;
+      *hi = 4294967295.0;
+      return;
+    default:
+      *lo = -HUGE_VAL;
+      *hi = HUGE_VAL;
+      return;
   }
 }
 
@@ -123,8 +148,7 @@ StatusOr<PlyHeader> parsePlyHeader(absl::string_view text, const std::string& fi
   while (true) {
     if (!lines.next(&line)) {
       OBJDB_RETURN_IF_ERROR(lines.status());
-      return absl::InvalidArgumentError(
-          absl::StrCat(file, ": PLY header has no end_header line"));
+      return absl::InvalidArgumentError(absl::StrCat(file, ": PLY header has no end_header line"));
     }
     if (lines.lineNumber() > 100000) return lines.error("PLY header is longer than 100000 lines");
     const auto fields = internal::splitFields(line);
@@ -158,10 +182,9 @@ StatusOr<PlyHeader> parsePlyHeader(absl::string_view text, const std::string& fi
       PlyProperty property;
       if (fields.size() == 5 && fields[1] == "list") {
         property.is_list = true;
-        if (!parsePlyType(fields[2], &property.count_type) ||
-            !isIntegerType(property.count_type)) {
-          return lines.error(absl::StrCat("list count type '", fields[2],
-                                          "' is not an integer PLY type"));
+        if (!parsePlyType(fields[2], &property.count_type) || !isIntegerType(property.count_type)) {
+          return lines.error(
+              absl::StrCat("list count type '", fields[2], "' is not an integer PLY type"));
         }
         if (!parsePlyType(fields[3], &property.type)) {
           return lines.error(absl::StrCat("unknown PLY type '", fields[3], "'"));
@@ -247,7 +270,9 @@ class AsciiSource {
 class BinarySource {
  public:
   BinarySource(absl::string_view data, size_t offset, bool big_endian, std::string file)
-      : data_(data), pos_(offset), swap_(big_endian != (std::endian::native == std::endian::big)),
+      : data_(data),
+        pos_(offset),
+        swap_(big_endian != (std::endian::native == std::endian::big)),
         file_(std::move(file)) {}
 
   uint64_t remainingBytes() const { return data_.size() - pos_; }
@@ -262,14 +287,30 @@ class BinarySource {
     pos_ += size;
     if (swap_) std::reverse(bytes, bytes + size);
     switch (type) {
-      case PlyType::kInt8: *value = load<int8_t>(bytes); break;
-      case PlyType::kUint8: *value = load<uint8_t>(bytes); break;
-      case PlyType::kInt16: *value = load<int16_t>(bytes); break;
-      case PlyType::kUint16: *value = load<uint16_t>(bytes); break;
-      case PlyType::kInt32: *value = load<int32_t>(bytes); break;
-      case PlyType::kUint32: *value = load<uint32_t>(bytes); break;
-      case PlyType::kFloat32: *value = load<float>(bytes); break;
-      case PlyType::kFloat64: *value = load<double>(bytes); break;
+      case PlyType::kInt8:
+        *value = load<int8_t>(bytes);
+        break;
+      case PlyType::kUint8:
+        *value = load<uint8_t>(bytes);
+        break;
+      case PlyType::kInt16:
+        *value = load<int16_t>(bytes);
+        break;
+      case PlyType::kUint16:
+        *value = load<uint16_t>(bytes);
+        break;
+      case PlyType::kInt32:
+        *value = load<int32_t>(bytes);
+        break;
+      case PlyType::kUint32:
+        *value = load<uint32_t>(bytes);
+        break;
+      case PlyType::kFloat32:
+        *value = load<float>(bytes);
+        break;
+      case PlyType::kFloat64:
+        *value = load<double>(bytes);
+        break;
     }
     return absl::OkStatus();
   }
@@ -327,8 +368,8 @@ Status readPlyBody(const PlyHeader& header, Source& source, const std::string& f
     return absl::InvalidArgumentError(absl::StrCat(file, ": PLY file has no 'vertex' element"));
   }
   if (!(vertex_element->count <= kMaxVertices)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "%s: %d vertices exceed the limit of %d", file, vertex_element->count, kMaxVertices));
+    return absl::InvalidArgumentError(absl::StrFormat("%s: %d vertices exceed the limit of %d",
+                                                      file, vertex_element->count, kMaxVertices));
   }
   const uint64_t vertex_count = vertex_element->count;
   std::vector<double> values;
@@ -345,11 +386,11 @@ Status readPlyBody(const PlyHeader& header, Source& source, const std::string& f
         const int i = element.find(name);
         return i >= 0 && !element.properties[size_t(i)].is_list ? i : -1;
       };
-      layout = {scalar("x"),  scalar("y"),   scalar("z"),    scalar("nx"), scalar("ny"),
+      layout = {scalar("x"),  scalar("y"),   scalar("z"),     scalar("nx"),  scalar("ny"),
                 scalar("nz"), scalar("red"), scalar("green"), scalar("blue")};
       if (layout.x < 0 || layout.y < 0 || layout.z < 0) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            file, ": element 'vertex' lacks one of the scalar properties x, y, z"));
+        return absl::InvalidArgumentError(
+            absl::StrCat(file, ": element 'vertex' lacks one of the scalar properties x, y, z"));
       }
       mesh->vertices.reserve(element.count);
       if (layout.nx >= 0 && layout.ny >= 0 && layout.nz >= 0) mesh->normals.reserve(element.count);
@@ -361,8 +402,8 @@ Status readPlyBody(const PlyHeader& header, Source& source, const std::string& f
       if (index_property < 0) index_property = element.find("vertex_index");
       if (index_property < 0 || !element.properties[size_t(index_property)].is_list ||
           !isIntegerType(element.properties[size_t(index_property)].type)) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            file, ": element 'face' has no integer list property 'vertex_indices'"));
+        return absl::InvalidArgumentError(
+            absl::StrCat(file, ": element 'face' has no integer list property 'vertex_indices'"));
       }
       // A usable face takes at least 4 bytes (binary: count + 3 one-byte indices; ASCII: "3 0 1 2"
       // takes 7), so this never reserves more than a few times the file size.
@@ -392,8 +433,7 @@ Status readPlyBody(const PlyHeader& header, Source& source, const std::string& f
         const uint64_t min_item_bytes = binary ? typeSize(property.type) : 2;
         if (!(count <= (source.remainingBytes() + 1) / min_item_bytes)) {
           return source.error(element, n, property.name,
-                              absl::StrFormat("list of %d items runs past the end of file",
-                                              count));
+                              absl::StrFormat("list of %d items runs past the end of file", count));
         }
         const bool keep = is_face && int(p) == index_property;
         if (keep) face_indices.clear();
@@ -409,9 +449,9 @@ Status readPlyBody(const PlyHeader& header, Source& source, const std::string& f
                                 values[size_t(layout.z)]);
         Eigen::Vector3f pf;
         if (!toFiniteFloats(p, &pf)) {
-          return source.error(element, n, "",
-                              absl::StrFormat("position (%g, %g, %g) is not finite in float",
-                                              p.x(), p.y(), p.z()));
+          return source.error(
+              element, n, "",
+              absl::StrFormat("position (%g, %g, %g) is not finite in float", p.x(), p.y(), p.z()));
         }
         mesh->vertices.push_back(pf);
         if (has_normals) {
@@ -448,9 +488,9 @@ Status readPlyBody(const PlyHeader& header, Source& source, const std::string& f
       } else if (is_face) {
         const std::string& name = element.properties[size_t(index_property)].name;
         if (face_indices.size() < 3) {
-          return source.error(element, n, name,
-                              absl::StrFormat("face has %d vertices; at least 3 are needed",
-                                              face_indices.size()));
+          return source.error(
+              element, n, name,
+              absl::StrFormat("face has %d vertices; at least 3 are needed", face_indices.size()));
         }
         for (double index : face_indices) {
           if (!(index >= 0.0 && index < double(vertex_count))) {
@@ -478,8 +518,8 @@ StatusOr<TriangleMesh> readPly(const fs::path& path) {
     AsciiSource source(data, header.data_offset, header.lines, file);
     OBJDB_RETURN_IF_ERROR(readPlyBody(header, source, file, &mesh));
   } else {
-    BinarySource source(data, header.data_offset,
-                        header.format == PlyFormat::kBinaryBigEndian, file);
+    BinarySource source(data, header.data_offset, header.format == PlyFormat::kBinaryBigEndian,
+                        file);
     OBJDB_RETURN_IF_ERROR(readPlyBody(header, source, file, &mesh));
   }
   return mesh;
@@ -514,8 +554,8 @@ StatusOr<TriangleMesh> readObj(const fs::path& path) {
       Eigen::Vector3d p;
       for (int k = 0; k < 3; ++k) {
         if (!internal::parseDouble(fields[size_t(k) + 1], &p[k])) {
-          return lines.error(absl::StrCat("vertex coordinate '", fields[size_t(k) + 1],
-                                          "' is not a number"));
+          return lines.error(
+              absl::StrCat("vertex coordinate '", fields[size_t(k) + 1], "' is not a number"));
         }
       }
       Eigen::Vector3f pf;
@@ -524,8 +564,8 @@ StatusOr<TriangleMesh> readObj(const fs::path& path) {
       mesh.vertices.push_back(pf);
     } else if (keyword == "f") {
       if (fields.size() < 4) {
-        return lines.error(absl::StrFormat("face has %d vertices; at least 3 are needed",
-                                           fields.size() - 1));
+        return lines.error(
+            absl::StrFormat("face has %d vertices; at least 3 are needed", fields.size() - 1));
       }
       corners.clear();
       const int64_t count = static_cast<int64_t>(mesh.vertices.size());
@@ -570,9 +610,9 @@ StatusOr<TriangleMesh> readObj(const fs::path& path) {
   }
   OBJDB_RETURN_IF_ERROR(lines.status());
   if (max_index >= int64_t(mesh.vertices.size())) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "%s line %d: face refers to vertex %d but the file has only %d vertices", path.string(),
-        max_index_line, max_index + 1, mesh.vertices.size()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s line %d: face refers to vertex %d but the file has only %d vertices",
+                        path.string(), max_index_line, max_index + 1, mesh.vertices.size()));
   }
   return mesh;
 }
@@ -617,8 +657,8 @@ StatusOr<TriangleMesh> readBinaryStl(absl::string_view data, const std::string& 
   uint32_t count = 0;
   std::memcpy(&count, data.data() + 80, 4);
   if constexpr (std::endian::native == std::endian::big) {
-    count = ((count & 0xFF) << 24) | ((count & 0xFF00) << 8) | ((count >> 8) & 0xFF00) |
-            (count >> 24);
+    count =
+        ((count & 0xFF) << 24) | ((count & 0xFF00) << 8) | ((count >> 8) & 0xFF00) | (count >> 24);
   }
   const uint64_t expected = 84 + 50 * uint64_t(count);
   if (expected != data.size()) {
@@ -691,8 +731,8 @@ StatusOr<TriangleMesh> readAsciiStl(absl::string_view text, const std::string& f
           Eigen::Vector3d p;
           for (int k = 0; k < 3; ++k) {
             if (!internal::parseDouble(fields[size_t(k) + 1], &p[k])) {
-              return lines.error(absl::StrCat("vertex coordinate '", fields[size_t(k) + 1],
-                                              "' is not a number"));
+              return lines.error(
+                  absl::StrCat("vertex coordinate '", fields[size_t(k) + 1], "' is not a number"));
             }
           }
           Eigen::Vector3f pf;
@@ -700,8 +740,8 @@ StatusOr<TriangleMesh> readAsciiStl(absl::string_view text, const std::string& f
           corners.push_back(merger.add(pf));
         } else if (keyword == "endloop") {
           if (corners.size() < 3) {
-            return lines.error(absl::StrFormat("facet has %d vertices; at least 3 are needed",
-                                               corners.size()));
+            return lines.error(
+                absl::StrFormat("facet has %d vertices; at least 3 are needed", corners.size()));
           }
           for (size_t k = 1; k + 1 < corners.size(); ++k) {
             mesh.triangles.emplace_back(corners[0], corners[k], corners[k + 1]);
@@ -788,8 +828,7 @@ Status writePly(const fs::path& path, const std::vector<Eigen::Vector3f>& points
                         formatFloat(n.z()));
       }
       if (has_colors) {
-        absl::StrAppend(&out, " ", int(colors[i].r), " ", int(colors[i].g), " ",
-                        int(colors[i].b));
+        absl::StrAppend(&out, " ", int(colors[i].r), " ", int(colors[i].g), " ", int(colors[i].b));
       }
       out += '\n';
     } else {
@@ -822,16 +861,16 @@ Status checkAttributes(const fs::path& path, const std::vector<Eigen::Vector3f>&
                        const std::vector<Rgb8>& colors) {
   const std::string what = absl::StrCat("cannot write ", path.string());
   if (!(normals.empty() || normals.size() == points.size())) {
-    return absl::InvalidArgumentError(absl::StrFormat("%s: %d normals for %d points", what,
-                                                      normals.size(), points.size()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: %d normals for %d points", what, normals.size(), points.size()));
   }
   if (!(colors.empty() || colors.size() == points.size())) {
-    return absl::InvalidArgumentError(absl::StrFormat("%s: %d colours for %d points", what,
-                                                      colors.size(), points.size()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: %d colours for %d points", what, colors.size(), points.size()));
   }
   if (!(points.size() <= kMaxVertices)) {
-    return absl::InvalidArgumentError(absl::StrFormat("%s: too many points (%d)", what,
-                                                      points.size()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: too many points (%d)", what, points.size()));
   }
   for (size_t i = 0; i < points.size(); ++i) {
     if (!points[i].allFinite()) {
@@ -859,9 +898,9 @@ StatusOr<TriangleMesh> readMesh(const fs::path& path) {
     } else if (extension == ".stl") {
       mesh = readStl(path);
     } else {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "cannot read mesh ", path.string(), ": unknown extension '", path.extension().string(),
-          "' (expected .ply, .obj or .stl)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("cannot read mesh ", path.string(), ": unknown extension '",
+                       path.extension().string(), "' (expected .ply, .obj or .stl)"));
     }
   } catch (const std::bad_alloc&) {
     return absl::ResourceExhaustedError(

@@ -36,14 +36,13 @@ Status readNumberArray(const json& value, size_t n, const fs::path& path, size_t
                        absl::string_view field, double* out) {
   if (!(value.is_array() && value.size() == n)) {
     return objectError(path, index, field,
-                       absl::StrFormat("must be an array of %d numbers (got %s)", n,
-                                       value.dump()));
+                       absl::StrFormat("must be an array of %d numbers (got %s)", n, value.dump()));
   }
   for (size_t k = 0; k < n; ++k) {
     if (!value[k].is_number()) {
-      return objectError(path, index, field,
-                         absl::StrFormat("must be an array of %d numbers (got %s)", n,
-                                         value.dump()));
+      return objectError(
+          path, index, field,
+          absl::StrFormat("must be an array of %d numbers (got %s)", n, value.dump()));
     }
     out[k] = value[k].get<double>();
   }
@@ -91,10 +90,10 @@ StatusOr<GroundTruthObject> parseObject(const json& value, const fs::path& path,
   }
   Eigen::Vector3d t;
   std::array<double, 4> q{};
-  OBJDB_RETURN_IF_ERROR(readNumberArray(pose->at("t"), 3, path, index, "T_world_object.t",
-                                        t.data()));
-  OBJDB_RETURN_IF_ERROR(readNumberArray(pose->at("q"), 4, path, index, "T_world_object.q",
-                                        q.data()));
+  OBJDB_RETURN_IF_ERROR(
+      readNumberArray(pose->at("t"), 3, path, index, "T_world_object.t", t.data()));
+  OBJDB_RETURN_IF_ERROR(
+      readNumberArray(pose->at("q"), 4, path, index, "T_world_object.q", q.data()));
   auto T = transformFromTranslationQuaternion(t, q);
   if (!T.ok()) return objectError(path, index, "T_world_object", T.status().message());
   object.T_world_object = *T;
@@ -147,9 +146,9 @@ Status writeObjectsJson(const fs::path& path, const std::vector<GroundTruthObjec
     entry["category"] = o.category;
     entry["mesh"] = o.mesh;
     entry["structure"] = o.is_structure;
-    entry["T_world_object"] = {{"t", {pose.t.x(), pose.t.y(), pose.t.z()}},
-                               {"q", {pose.q_xyzw[0], pose.q_xyzw[1], pose.q_xyzw[2],
-                                      pose.q_xyzw[3]}}};
+    entry["T_world_object"] = {
+        {"t", {pose.t.x(), pose.t.y(), pose.t.z()}},
+        {"q", {pose.q_xyzw[0], pose.q_xyzw[1], pose.q_xyzw[2], pose.q_xyzw[3]}}};
     list.push_back(std::move(entry));
   }
   nlohmann::ordered_json root;
@@ -179,8 +178,8 @@ StatusOr<std::unique_ptr<ObjdbDataset>> ObjdbDataset::open(const fs::path& root,
     OBJDB_ASSIGN_OR_RETURN(dataset->intrinsics_,
                            readIntrinsicsJson(intrinsics_path, &dataset->metres_per_unit_));
   } else if (!options.intrinsics) {
-    return absl::NotFoundError(absl::StrCat("objdb dataset ", root.string(),
-                                            " has no intrinsics.json"));
+    return absl::NotFoundError(
+        absl::StrCat("objdb dataset ", root.string(), " has no intrinsics.json"));
   }
   if (options.intrinsics) {
     OBJDB_RETURN_IF_ERROR(annotate(options.intrinsics->validate(), "intrinsics override"));
@@ -194,8 +193,7 @@ StatusOr<std::unique_ptr<ObjdbDataset>> ObjdbDataset::open(const fs::path& root,
     OBJDB_ASSIGN_OR_RETURN(dataset->objects_, readObjectsJson(objects_path));
   }
   logger("io")->info("opened objdb dataset {}: {} frames{}{}, {} ground-truth objects, {}",
-                     root.string(), dataset->poses_.size(),
-                     dataset->has_color_ ? ", colour" : "",
+                     root.string(), dataset->poses_.size(), dataset->has_color_ ? ", colour" : "",
                      dataset->has_instances_ ? ", instances" : "", dataset->objects_.size(),
                      toString(dataset->intrinsics_));
   return dataset;
@@ -203,8 +201,8 @@ StatusOr<std::unique_ptr<ObjdbDataset>> ObjdbDataset::open(const fs::path& root,
 
 StatusOr<Frame> ObjdbDataset::loadFrame(size_t i) const {
   if (!(i < poses_.size())) {
-    return absl::OutOfRangeError(absl::StrFormat("frame %d is out of range: %s has %d frames",
-                                                 i, root_.string(), poses_.size()));
+    return absl::OutOfRangeError(absl::StrFormat("frame %d is out of range: %s has %d frames", i,
+                                                 root_.string(), poses_.size()));
   }
   const std::string name = frameFileName(i);
   Frame frame;
@@ -228,9 +226,9 @@ StatusOr<Frame> ObjdbDataset::loadFrame(size_t i) const {
   if (has_instances_) {
     const fs::path instances_path = root_ / "instances" / name;
     OBJDB_ASSIGN_OR_RETURN(InstanceImage instances, readUint16Png(instances_path));
-    OBJDB_RETURN_IF_ERROR(intrinsics_.checkImageSize(
-        instances.width, instances.height,
-        absl::StrCat("instance image ", instances_path.string())));
+    OBJDB_RETURN_IF_ERROR(
+        intrinsics_.checkImageSize(instances.width, instances.height,
+                                   absl::StrCat("instance image ", instances_path.string())));
     frame.instances = std::move(instances);
   }
   return frame;
@@ -257,8 +255,7 @@ StatusOr<std::unique_ptr<ObjdbDatasetWriter>> ObjdbDatasetWriter::create(
     return absl::UnavailableError(
         absl::StrCat("cannot create ", (root / "depth").string(), ": ", ec.message()));
   }
-  OBJDB_RETURN_IF_ERROR(writeIntrinsicsJson(root / "intrinsics.json", intrinsics,
-                                            metres_per_unit));
+  OBJDB_RETURN_IF_ERROR(writeIntrinsicsJson(root / "intrinsics.json", intrinsics, metres_per_unit));
   auto writer = std::unique_ptr<ObjdbDatasetWriter>(new ObjdbDatasetWriter());
   writer->root_ = root;
   writer->intrinsics_ = intrinsics;

@@ -71,12 +71,11 @@ StatusOr<std::vector<TumEntry>> readTumList(const fs::path& path) {
     if (internal::isCommentOrBlank(line)) continue;
     const auto fields = internal::splitFields(line);
     if (fields.size() != 2) {
-      return lines.error(absl::StrFormat("expected 'timestamp path', got %d fields",
-                                         fields.size()));
+      return lines.error(
+          absl::StrFormat("expected 'timestamp path', got %d fields", fields.size()));
     }
     TumEntry entry;
-    if (!(internal::parseDouble(fields[0], &entry.timestamp) &&
-          std::isfinite(entry.timestamp))) {
+    if (!(internal::parseDouble(fields[0], &entry.timestamp) && std::isfinite(entry.timestamp))) {
       return lines.error(absl::StrCat("timestamp '", fields[0], "' is not a finite number"));
     }
     if (!isSafeRelativePath(fields[1])) {
@@ -95,8 +94,7 @@ StatusOr<std::vector<TumPose>> readTumTrajectory(const fs::path& path) {
   internal::LineReader lines(text, path.string());
   std::vector<TumPose> poses;
   absl::string_view line;
-  static constexpr const char* kNames[8] = {"timestamp", "tx", "ty", "tz",
-                                            "qx",        "qy", "qz", "qw"};
+  static constexpr const char* kNames[8] = {"timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw"};
   while (lines.next(&line)) {
     if (internal::isCommentOrBlank(line)) continue;
     const auto fields = internal::splitFields(line);
@@ -107,8 +105,7 @@ StatusOr<std::vector<TumPose>> readTumTrajectory(const fs::path& path) {
     double values[8];
     for (int k = 0; k < 8; ++k) {
       if (!(internal::parseDouble(fields[k], &values[k]) && std::isfinite(values[k]))) {
-        return lines.error(
-            absl::StrCat(kNames[k], " '", fields[k], "' is not a finite number"));
+        return lines.error(absl::StrCat(kNames[k], " '", fields[k], "' is not a finite number"));
       }
     }
     TumPose pose;
@@ -139,8 +136,8 @@ Status writeTumTrajectory(const fs::path& path, const std::vector<TumPose>& pose
   for (size_t i = 0; i < poses.size(); ++i) {
     const TumPose& p = poses[i];
     if (!std::isfinite(p.timestamp)) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "writing %s: pose %d has a non-finite timestamp", path.string(), i));
+      return absl::InvalidArgumentError(
+          absl::StrFormat("writing %s: pose %d has a non-finite timestamp", path.string(), i));
     }
     OBJDB_RETURN_IF_ERROR(annotate(transformFromTumPose(p).status(),
                                    absl::StrFormat("writing %s: pose %d", path.string(), i)));
@@ -156,9 +153,8 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
                                                        const DatasetOptions& options) {
   OBJDB_RETURN_IF_ERROR(internal::checkDirectory(root, "TUM dataset folder"));
   if (!(std::isfinite(options.max_time_difference_s) && options.max_time_difference_s >= 0.0)) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("max_time_difference_s must be finite and >= 0 (got %g)",
-                        options.max_time_difference_s));
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "max_time_difference_s must be finite and >= 0 (got %g)", options.max_time_difference_s));
   }
   auto dataset = std::unique_ptr<TumDataset>(new TumDataset());
   dataset->root_ = root;
@@ -183,8 +179,8 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
   OBJDB_ASSIGN_OR_RETURN(const auto depth_list, readTumList(root / "depth.txt"));
   const fs::path groundtruth_path = root / "groundtruth.txt";
   if (!fs::exists(groundtruth_path, ec)) {
-    return absl::NotFoundError(absl::StrCat("TUM dataset ", root.string(),
-                                            " has no groundtruth.txt (camera poses)"));
+    return absl::NotFoundError(
+        absl::StrCat("TUM dataset ", root.string(), " has no groundtruth.txt (camera poses)"));
   }
   OBJDB_ASSIGN_OR_RETURN(const auto poses, readTumTrajectory(groundtruth_path));
   std::vector<TumEntry> rgb_list;
@@ -219,15 +215,15 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
   logger("io")->info(
       "opened TUM dataset {}: {} frames ({} depth images without a pose within {} s skipped, {} "
       "frames without colour), {}",
-      root.string(), dataset->frames_.size(), dataset->frames_without_pose_, max_dt,
-      without_color, toString(dataset->intrinsics_));
+      root.string(), dataset->frames_.size(), dataset->frames_without_pose_, max_dt, without_color,
+      toString(dataset->intrinsics_));
   return dataset;
 }
 
 StatusOr<Frame> TumDataset::loadFrame(size_t i) const {
   if (!(i < frames_.size())) {
-    return absl::OutOfRangeError(absl::StrFormat("frame %d is out of range: %s has %d frames",
-                                                 i, root_.string(), frames_.size()));
+    return absl::OutOfRangeError(absl::StrFormat("frame %d is out of range: %s has %d frames", i,
+                                                 root_.string(), frames_.size()));
   }
   const Associated& entry = frames_[i];
   Frame frame;
@@ -235,12 +231,10 @@ StatusOr<Frame> TumDataset::loadFrame(size_t i) const {
   frame.timestamp = entry.depth.timestamp;
   const fs::path depth_path = root_ / entry.depth.path;
   OBJDB_ASSIGN_OR_RETURN(const RawDepthImage raw, readUint16Png(depth_path));
-  OBJDB_RETURN_IF_ERROR(
-      intrinsics_.checkImageSize(raw.width, raw.height, absl::StrCat("depth image ",
-                                                                     depth_path.string())));
+  OBJDB_RETURN_IF_ERROR(intrinsics_.checkImageSize(
+      raw.width, raw.height, absl::StrCat("depth image ", depth_path.string())));
   OBJDB_ASSIGN_OR_RETURN(frame.depth, depthFromRaw(raw, 1.0 / depth_factor_));
-  OBJDB_ASSIGN_OR_RETURN(frame.T_world_camera,
-                         transformFromTumPose(entry.pose));
+  OBJDB_ASSIGN_OR_RETURN(frame.T_world_camera, transformFromTumPose(entry.pose));
   if (!entry.color_path.empty()) {
     const fs::path color_path = root_ / entry.color_path;
     OBJDB_ASSIGN_OR_RETURN(ColorImage color, readColorImage(color_path));

@@ -40,8 +40,9 @@ TEST(DepthFromRaw, RejectsBadScale) {
 
 TEST(DepthToRaw, InvalidDepthsBecomeZeroAndTooFarIsCountedAsClipped) {
   DepthImage depth(6, 1);
-  depth.data = {1.0f, std::numeric_limits<float>::quiet_NaN(), -2.0f,
-                std::numeric_limits<float>::infinity(), 70.0f, 0.0f};
+  depth.data = {1.0f,  std::numeric_limits<float>::quiet_NaN(),
+                -2.0f, std::numeric_limits<float>::infinity(),
+                70.0f, 0.0f};
   size_t clipped = 99;
   const auto raw = depthToRaw(depth, 0.001, &clipped);
   ASSERT_TRUE(raw.ok()) << raw.status();

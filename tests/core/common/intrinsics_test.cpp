@@ -74,8 +74,8 @@ TEST(Intrinsics, CheckImageSizeNamesBothSizes) {
 
 TEST(Intrinsics, ProjectInvertsBackProject) {
   const Intrinsics k = Intrinsics::vga();
-  for (const auto& [u, v, z] : {std::tuple{0.0, 0.0, 0.5}, std::tuple{319.5, 239.5, 2.0},
-                                std::tuple{600.25, 17.75, 3.3}}) {
+  for (const auto& [u, v, z] :
+       {std::tuple{0.0, 0.0, 0.5}, std::tuple{319.5, 239.5, 2.0}, std::tuple{600.25, 17.75, 3.3}}) {
     const Eigen::Vector3d p = k.backProject(u, v, z);
     EXPECT_DOUBLE_EQ(p.z(), z);
     const Eigen::Vector2d uv = k.project(p);

@@ -114,7 +114,8 @@ TEST(ParamsJson, ToJsonRoundTrips) {
 
 TEST(ParamsFile, LoadsFileAndNamesItOnError) {
   testing::TempDir dir;
-  ASSERT_TRUE(testing::writeTextFile(dir / "good.json", R"({"descriptors": {"fpfh_radius_m": 0.2}})"));
+  ASSERT_TRUE(
+      testing::writeTextFile(dir / "good.json", R"({"descriptors": {"fpfh_radius_m": 0.2}})"));
   const auto good = loadParamsFile(dir / "good.json");
   ASSERT_TRUE(good.ok()) << good.status();
   EXPECT_FLOAT_EQ(good->descriptors.fpfh_radius_m, 0.2f);

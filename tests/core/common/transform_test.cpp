@@ -87,7 +87,7 @@ TEST(LookAt, CameraZPointsAtTargetAndYDown) {
   EXPECT_TRUE(validateTransform(*T, "lookAt").ok());
   const Eigen::Vector3d z = T->linear().col(2);
   EXPECT_TRUE(z.isApprox((target - position).normalized(), 1e-12));
-  EXPECT_LT(T->linear().col(1).dot(Eigen::Vector3d::UnitZ()), 0.0);  // image y points down
+  EXPECT_LT(T->linear().col(1).dot(Eigen::Vector3d::UnitZ()), 0.0);           // image y points down
   EXPECT_NEAR(T->linear().col(0).dot(Eigen::Vector3d::UnitZ()), 0.0, 1e-12);  // no roll
   EXPECT_TRUE(T->translation().isApprox(position));
   // The target lies on the optical axis in front of the camera.

@@ -12,8 +12,8 @@
 namespace objdb::io {
 namespace {
 
-using ::testing::HasSubstr;
 using objdb::testing::TempDir;
+using ::testing::HasSubstr;
 
 std::string readBytes(const std::filesystem::path& path) {
   std::ifstream in(path, std::ios::binary);

@@ -13,9 +13,9 @@ namespace objdb::io {
 namespace {
 
 namespace fs = std::filesystem;
-using ::testing::HasSubstr;
 using objdb::testing::TempDir;
 using objdb::testing::writeTextFile;
+using ::testing::HasSubstr;
 
 // Unit cube [0,1]^3 with outward winding.
 TriangleMesh unitCube() {
@@ -271,9 +271,9 @@ TEST(ObjMesh, QuadsNegativeIndicesAndSlashForms) {
                             "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n"
                             "vn 0 0 -1\nvn 0 0 1\n"
                             "usemtl grey\ns off\n"
-                            "f 1/1/1 3/2/1 4/3/1 2/4/1\n"         // bottom, v/vt/vn
-                            "f -4//2 -3//2 -1//2 -2//2\n"         // top, negative, v//vn
-                            "f 1/1 2/2 6/3 5/4\n"                  // v/vt
+                            "f 1/1/1 3/2/1 4/3/1 2/4/1\n"  // bottom, v/vt/vn
+                            "f -4//2 -3//2 -1//2 -2//2\n"  // top, negative, v//vn
+                            "f 1/1 2/2 6/3 5/4\n"          // v/vt
                             "f 3 7 8 4\n"
                             "f 1 5 7 3\n"
                             "f 2 4 8 6\n"));
@@ -378,8 +378,7 @@ TEST(StlMesh, BinaryWithWrongCountIsRejected) {
   EXPECT_THAT(std::string(mesh.status().message()), HasSubstr("3000000000 triangles"));
 
   writeBytes(dir / "short.stl", "tiny");
-  EXPECT_THAT(std::string(readMesh(dir / "short.stl").status().message()),
-              HasSubstr("too short"));
+  EXPECT_THAT(std::string(readMesh(dir / "short.stl").status().message()), HasSubstr("too short"));
 }
 
 // Random byte corruptions and truncations of valid files of every format: each read either

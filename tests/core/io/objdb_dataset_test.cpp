@@ -14,9 +14,9 @@ namespace objdb::io {
 namespace {
 
 namespace fs = std::filesystem;
-using ::testing::HasSubstr;
 using objdb::testing::TempDir;
 using objdb::testing::writeTextFile;
+using ::testing::HasSubstr;
 
 Intrinsics smallCamera() { return {8, 6, 10.0, 11.0, 3.5, 2.5}; }
 
@@ -33,8 +33,9 @@ Frame makeFrame(size_t k, const Intrinsics& intrinsics, bool color = true, bool 
   frame.timestamp = 1.0 + 0.0333 * double(k);
   frame.depth = *depthFromRaw(raw, 0.001);
   Transform T = Transform::Identity();
-  T.linear() = Eigen::AngleAxisd(0.3 + 0.5 * double(k), Eigen::Vector3d(0.2, 1.0, -0.4).normalized())
-                   .toRotationMatrix();
+  T.linear() =
+      Eigen::AngleAxisd(0.3 + 0.5 * double(k), Eigen::Vector3d(0.2, 1.0, -0.4).normalized())
+          .toRotationMatrix();
   T.translation() = Eigen::Vector3d(0.1 * double(k), -1.25, 1.0 / 3.0);
   frame.T_world_camera = T;
   if (color) {
@@ -71,8 +72,7 @@ std::vector<GroundTruthObject> makeObjects() {
   return {chair, floor};
 }
 
-Status writeDataset(const fs::path& root, size_t frames, bool color = true,
-                    bool instances = true) {
+Status writeDataset(const fs::path& root, size_t frames, bool color = true, bool instances = true) {
   auto writer = ObjdbDatasetWriter::create(root, smallCamera(), 0.001);
   if (!writer.ok()) return writer.status();
   for (size_t k = 0; k < frames; ++k) {
@@ -208,8 +208,7 @@ TEST(ObjdbDatasetWriter, RejectsBadFrames) {
   EXPECT_EQ(w.framesWritten(), 1u);
 
   ASSERT_TRUE(w.finish().ok());
-  EXPECT_EQ(w.addFrame(makeFrame(1, smallCamera())).code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(w.addFrame(makeFrame(1, smallCamera())).code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(w.finish().code(), absl::StatusCode::kFailedPrecondition);
 }
 
@@ -344,8 +343,8 @@ TEST(OpenDataset, FolderWithNeitherLayoutIsNamed) {
 
 TEST(IntrinsicsJson, RoundTripAndNotes) {
   TempDir dir;
-  const Intrinsics k{640, 480, 615.1951904296875, 615.1952514648438, 298.44268798828125,
-                     247.51919555664062};
+  const Intrinsics k{
+      640, 480, 615.1951904296875, 615.1952514648438, 298.44268798828125, 247.51919555664062};
   ASSERT_TRUE(writeIntrinsicsJson(dir / "intrinsics.json", k, 0.00025).ok());
   double scale = 0.0;
   auto back = readIntrinsicsJson(dir / "intrinsics.json", &scale);
@@ -379,8 +378,7 @@ TEST(IntrinsicsJson, BadFilesNameFileAndKey) {
         "'width' must be an integer");
   check(R"({"width": 8, "height": 6, "fx": "ten", "fy": 10, "cx": 3.5, "cy": 2.5})",
         "'fx' must be a number");
-  check(R"({"width": 8, "height": 6, "fx": 10, "fy": 10, "cx": 30, "cy": 2.5})",
-        "principal point");
+  check(R"({"width": 8, "height": 6, "fx": 10, "fy": 10, "cx": 30, "cy": 2.5})", "principal point");
   check(R"({"width": 8, "height": 6, "fx": 10, "fy": 10, "cx": 3.5, "cy": 2.5,
             "depth_scale_m": -1})",
         "depth_scale_m");

@@ -13,9 +13,9 @@ namespace objdb::io {
 namespace {
 
 namespace fs = std::filesystem;
-using ::testing::HasSubstr;
 using objdb::testing::TempDir;
 using objdb::testing::writeTextFile;
+using ::testing::HasSubstr;
 
 const fs::path kSample = fs::path(OBJDB_SOURCE_DIR) / "tests" / "data" / "tum_sample";
 
@@ -56,8 +56,8 @@ TEST(TumDataset, SampleAssociatesNearestPoseAndSkipsFrameWithoutOne) {
     int color_file;  // -1: no colour within 0.02 s
   };
   const Expected expected[3] = {
-      {100.0, 0,
-       expectedPose({1.0, 2.0, 3.0}, Eigen::Quaterniond(0.70710678, 0, 0, 0.70710678)), 0},
+      {100.0, 0, expectedPose({1.0, 2.0, 3.0}, Eigen::Quaterniond(0.70710678, 0, 0, 0.70710678)),
+       0},
       {100.033, 1, expectedPose({-0.5, 0.25, 1.5}, Eigen::Quaterniond(0.5, 0.5, 0.5, 0.5)), -1},
       {100.4, 3, expectedPose({0.0, -1.0, 0.75}, Eigen::Quaterniond(0, 0, 1, 0)), 2},
   };

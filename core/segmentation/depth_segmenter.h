@@ -1,0 +1,118 @@
+// Geometric segmentation of single depth frames (paper §III-A, after Uckermann et al. and
+// Tateno et al.): depth-discontinuity edges + concave boundaries from a normal-based convexity
+// map cut the image into closed regions; each region above a minimum size becomes a labelled 3D
+// segment. Labels are per frame only — the GSM (§III-B) makes them consistent over time.
+//
+// Every step is a separate function on plain images so it can be tested and shown on its own;
+// DepthSegmenter runs them in order with no per-pixel allocation and reports per-step timings.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/image.h"
+#include "core/common/intrinsics.h"
+#include "core/common/params.h"
+
+namespace objdb::segmentation {
+
+// Camera-frame 3D point per pixel; z = 0 marks "no measurement".
+using PointImage = Image<Eigen::Vector3f>;
+// Unit normals pointing toward the camera; zero vector = unknown.
+using NormalImage = Image<Eigen::Vector3f>;
+using MaskImage = Image<uint8_t>;      // 0 / 1
+using LabelImage = Image<int32_t>;     // 0 = no segment
+
+// Fills holes (0 depth) of at most `max_hole_px` pixels across with the mean of the valid pixels
+// around them, in up to `iterations` passes of a 3×3 neighbourhood. Sensor dependent (paper:
+// optional); off by default. Returns the number of pixels filled.
+size_t fillDepthHoles(DepthImage* depth, int iterations);
+
+// Back-projects a depth image; invalid (0, NaN, ±inf, negative) depth → point (0, 0, 0).
+void depthToPoints(const DepthImage& depth, const Intrinsics& intrinsics, PointImage* points);
+
+// Depth discontinuities: 1 where the largest depth difference to a valid pixel in the
+// window × window neighbourhood exceeds `threshold` · depth (relative jump).
+void discontinuityMap(const DepthImage& depth, int window, float threshold, MaskImage* edges);
+
+// Normals from the pixel neighbourhood: the point image is box-filtered over `window` × `window`
+// pixels (valid, depth-consistent pixels only) and the normal is the cross product of central
+// differences of the smoothed points `window / 2` pixels apart, falling back to one-sided
+// differences across a depth jump of more than `max_relative_distance` · z. A plane gives its
+// exact normal; noise is averaged over the window.
+void computeNormals(const PointImage& points, int window, float max_relative_distance,
+                    NormalImage* normals);
+
+// Min-convexity map in [−1, 1]: for each pixel, the minimum over neighbours within
+// `window` / 2 pixels (8 directions) of 1 where the neighbour lies behind the tangent plane (or
+// within `offset_m` of it: convex or flat), else the dot product of the two normals (concave).
+void convexityMap(const PointImage& points, const NormalImage& normals, int window,
+                  float offset_m, Image<float>* convexity);
+
+// Segments of one frame.
+struct Segment {
+  int32_t label = 0;                       // 1.. in this frame
+  std::vector<uint32_t> pixels;            // row-major pixel indices
+  std::vector<Eigen::Vector3f> points;     // camera frame, metres
+  std::vector<Eigen::Vector3f> normals;    // unit, toward the camera
+  std::optional<Rgb8> mean_color;          // when a colour image was given
+};
+
+struct SegmentationTimings {
+  double points_ms = 0, discontinuity_ms = 0, normals_ms = 0, convexity_ms = 0, labels_ms = 0,
+         segments_ms = 0, total_ms = 0;
+};
+
+struct SegmentationResult {
+  LabelImage labels;          // 0 = no segment
+  std::vector<Segment> segments;
+  size_t invalid_pixels = 0;  // no measurement (incl. NaN / inf / negative)
+  size_t boundary_pixels = 0; // valid but on an edge after label growth
+  size_t dropped_small = 0;   // regions below the minimum size
+  SegmentationTimings timings;
+};
+
+// Intermediate maps of the last run (for pictures and tests).
+struct SegmentationMaps {
+  DepthImage depth;           // after optional hole filling
+  MaskImage discontinuities;
+  NormalImage normals;
+  Image<float> convexity;
+  MaskImage boundaries;       // discontinuity ∪ concave ∪ invalid
+};
+
+class DepthSegmenter {
+ public:
+  // Params are validated; the minimum segment size is given for VGA (640×480) and scaled with
+  // the image area for other resolutions.
+  static StatusOr<DepthSegmenter> create(const SegmentationParams& params,
+                                         const Intrinsics& intrinsics);
+
+  // Segments one frame. Errors: image size differs from the intrinsics, colour size differs.
+  // All-invalid depth gives an empty result, not an error.
+  StatusOr<SegmentationResult> segment(const DepthImage& depth,
+                                       const ColorImage* color = nullptr,
+                                       SegmentationMaps* maps = nullptr);
+
+  const SegmentationParams& params() const { return params_; }
+  int minSegmentPixels() const { return min_segment_px_; }
+
+ private:
+  DepthSegmenter(const SegmentationParams& params, const Intrinsics& intrinsics);
+  SegmentationParams params_;
+  Intrinsics intrinsics_;
+  int min_segment_px_ = 0;
+  // Scratch buffers reused between frames.
+  DepthImage depth_;
+  PointImage points_;
+  PointImage smoothed_;
+  NormalImage normals_;
+  MaskImage edges_;
+  MaskImage boundaries_;
+  Image<float> convexity_;
+};
+
+}  // namespace objdb::segmentation

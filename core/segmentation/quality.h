@@ -1,0 +1,41 @@
+// Segmentation quality against ground-truth instance masks (issue 3 targets): coverage (IoU of
+// each object's best segment, weighted by object size), under-segmentation (segments spanning
+// two or more instances) and over-segmentation (segments per object).
+#pragma once
+
+#include <cstdint>
+#include <set>
+
+#include "core/common/image.h"
+#include "core/segmentation/depth_segmenter.h"
+
+namespace objdb::segmentation {
+
+struct QualityCounts {
+  // Sums over frames; ratios are computed by the accessors.
+  double weighted_iou = 0.0;       // Σ pixels(object) · best IoU(object)
+  double object_pixels = 0.0;      // Σ pixels(object)
+  size_t objects = 0;              // object observations (object × frame)
+  size_t segments = 0;
+  size_t under_segmented = 0;      // segments with ≥ 2 instances each above the share limit
+  size_t object_segments = 0;      // segments whose majority instance is an object
+
+  double coverage() const { return object_pixels > 0 ? weighted_iou / object_pixels : 0.0; }
+  double underSegmentationRate() const {
+    return segments ? double(under_segmented) / double(segments) : 0.0;
+  }
+  double segmentsPerObject() const { return objects ? double(object_segments) / double(objects) : 0.0; }
+  void add(const QualityCounts& other);
+};
+
+struct QualityOptions {
+  std::set<uint16_t> structure_ids;  // floor / walls: scored for under-segmentation only
+  double under_share = 0.10;         // an instance counts in a segment above this share
+  int min_object_pixels = 50;        // smaller ground-truth objects in a frame are not scored
+};
+
+// Scores one frame's labels (0 = none) against its instance mask (0 = none).
+QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage& instances,
+                                   const QualityOptions& options);
+
+}  // namespace objdb::segmentation
