@@ -2,12 +2,17 @@
 // throughput with one segmenter per thread) and quality against the ground-truth instance masks,
 // noisy vs noise-free, at VGA and Tango resolution. Usage:
 //   segmentation_eval [--frames-per-session N] [--camera vga|tango|both] [--threads N]
+#include <malloc.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
+#include "core/common/params_io.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "core/segmentation/quality.h"
 #include "core/sim/generator.h"
@@ -49,9 +54,9 @@ struct RunResult {
   double throughput_fps = 0;
 };
 
-RunResult run(const std::vector<Sample>& samples, const Intrinsics& k, int threads) {
+RunResult run(const std::vector<Sample>& samples, const Intrinsics& k, int threads,
+             const SegmentationParams& params) {
   RunResult r;
-  const SegmentationParams params;
   auto segmenter = segmentation::DepthSegmenter::create(params, k).value();
   size_t n = 0;
   for (const auto& s : samples) {
@@ -97,20 +102,34 @@ RunResult run(const std::vector<Sample>& samples, const Intrinsics& k, int threa
 
 int main(int argc, char** argv) {
   using namespace objdb;
+  // Keep freed frame buffers in the heap instead of returning them to the kernel: a long-running
+  // server reaches this steady state by itself; a short benchmark would otherwise time page
+  // faults of fresh memory every frame.
+  mallopt(M_MMAP_THRESHOLD, 256 << 20);
+  mallopt(M_TRIM_THRESHOLD, 512 << 20);
+  cv::setNumThreads(1);  // one-thread figures mean one thread, OpenCV's pool included
   int per_session = 30, threads = 2;
   std::string cameras = "both";
+  Params params;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--frames-per-session" && i + 1 < argc) {
       per_session = std::max(1, std::atoi(argv[++i]));
     } else if (a == "--camera" && i + 1 < argc) {
       cameras = argv[++i];
+    } else if (a == "--config" && i + 1 < argc) {
+      auto loaded = loadParamsFile(argv[++i]);
+      if (!loaded.ok()) {
+        std::fprintf(stderr, "segmentation_eval: %s\n", std::string(loaded.status().message()).c_str());
+        return 1;
+      }
+      params = *loaded;
     } else if (a == "--threads" && i + 1 < argc) {
       threads = std::max(1, std::atoi(argv[++i]));
     } else {
       std::fprintf(stderr,
                    "usage: segmentation_eval [--frames-per-session N] [--camera vga|tango|both] "
-                   "[--threads N]\n");
+                   "[--threads N] [--config FILE.json]\n");
       return 2;
     }
   }
@@ -130,7 +149,7 @@ int main(int argc, char** argv) {
     const Intrinsics k = intrinsicsPreset(camera).value();
     for (bool noise : {true, false}) {
       const auto samples = renderFrames(camera, noise, per_session);
-      const auto r = run(samples, k, threads);
+      const auto r = run(samples, k, threads, params.segmentation);
       const auto& t = r.timings;
       std::printf(
           "%-6s %-6s | %6.2f %6.2f %6.2f %6.2f %6.2f %6.2f | %7.2f | %7.1f %9.1f | %8.3f %7.2f "

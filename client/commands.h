@@ -8,5 +8,6 @@ namespace objdb {
 int runHealthCommand(int argc, char** argv);  // health_command.cpp
 int runSimCommand(int argc, char** argv);     // sim_command.cpp
 int runInfoCommand(int argc, char** argv);    // info_command.cpp
+int runSegmentCommand(int argc, char** argv); // segment_command.cpp
 
 }  // namespace objdb

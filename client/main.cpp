@@ -15,6 +15,7 @@ commands:
   health   ask a server whether it is serving (grpc.health.v1 Check)
   sim      render synthetic RGB-D datasets with ground truth (presets or scene files)
   info     describe dataset folders (objdb or TUM layout): frames, camera, objects
+  segment  segment one dataset frame and write its steps as PNGs (depth, normals, labels, ...)
   help     show this text
 
 Run "objdb <command> --help" for the options of a command.
@@ -35,6 +36,7 @@ int main(int argc, char** argv) {
   if (command == "health") return objdb::runHealthCommand(argc - 1, argv + 1);
   if (command == "sim") return objdb::runSimCommand(argc - 1, argv + 1);
   if (command == "info") return objdb::runInfoCommand(argc - 1, argv + 1);
+  if (command == "segment") return objdb::runSegmentCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }

@@ -23,7 +23,7 @@ struct SegmentationParams {
   float convexity_offset_m = 0.0005f;         // offsets above −this along the normal are convex
   int min_segment_px = 500;                   // smaller regions are dropped (VGA; scale for others)
   float max_label_growth_distance_m = 0.05f;  // edge pixels join a neighbour label within this
-  int label_growth_iterations = 4;            // passes of growing labels into edge pixels
+  int label_growth_iterations = 8;            // passes of growing labels into edge pixels
   Status validate() const;
 };
 

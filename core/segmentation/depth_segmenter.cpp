@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
@@ -17,12 +18,19 @@ double msSince(Clock::time_point t) {
 }
 
 constexpr int kVgaWidth = 640;
+constexpr int kMinNormalWindow = 9;
 
 // Scales a window given for VGA to `width`, keeping it odd and ≥ 3.
 int scaledWindow(int vga_window, int width) {
   const int w = static_cast<int>(std::lround(double(vga_window) * width / kVgaWidth));
   return std::max(3, w | 1);
 }
+
+// The normal window W is split into a box filter of about W/3 (noise) and central differences
+// W/3 pixels apart (baseline): the footprint stays W wide while a silhouette contaminates only
+// the W/6 pixels next to it.
+int smoothingWindow(int normal_window) { return std::max(1, (normal_window / 3) | 1); }
+int differenceOffset(int normal_window) { return std::max(1, normal_window / 3); }
 
 template <typename T>
 void resize(Image<T>* image, int w, int h, T fill) {
@@ -86,30 +94,30 @@ void depthToPoints(const DepthImage& depth, const Intrinsics& k, PointImage* poi
 }
 
 void discontinuityMap(const DepthImage& depth, int window, float threshold, MaskImage* edges) {
-  const int w = depth.width, h = depth.height, r = window / 2;
+  const int w = depth.width, h = depth.height;
   resize(edges, w, h, uint8_t{0});
-  for (int v = 0; v < h; ++v) {
-    const int v0 = std::max(0, v - r), v1 = std::min(h - 1, v + r);
-    for (int u = 0; u < w; ++u) {
-      const float z = depth.data[size_t(v) * w + u];
-      uint8_t edge = 0;
-      if (isValidDepth(z)) {
-        const float limit = threshold * z;
-        const int u0 = std::max(0, u - r), u1 = std::min(w - 1, u + r);
-        for (int vv = v0; vv <= v1 && !edge; ++vv) {
-          const float* row = &depth.data[size_t(vv) * w];
-          for (int uu = u0; uu <= u1; ++uu) {
-            const float zn = row[uu];
-            // Holes are not edges: only jumps to measured depth count.
-            if (isValidDepth(zn) && std::abs(zn - z) > limit) {
-              edge = 1;
-              break;
-            }
-          }
-        }
-      }
-      edges->data[size_t(v) * w + u] = edge;
-    }
+  // Largest jump to a measured neighbour = max(dilate(d) − d, d − erode(d)), with holes
+  // excluded from both (0 never wins a max, +inf never wins a min): holes are not edges.
+  thread_local cv::Mat clean, for_min, dilated, eroded;
+  clean.create(h, w, CV_32F);
+  for_min.create(h, w, CV_32F);
+  float* c = clean.ptr<float>();
+  float* m = for_min.ptr<float>();
+  const float kInf = std::numeric_limits<float>::infinity();
+  for (size_t i = 0; i < depth.data.size(); ++i) {
+    const bool valid = isValidDepth(depth.data[i]);
+    c[i] = valid ? depth.data[i] : 0.0f;
+    m[i] = valid ? depth.data[i] : kInf;
+  }
+  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(window, window));
+  cv::dilate(clean, dilated, kernel, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::erode(for_min, eroded, kernel, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(kInf));
+  const float* hi = dilated.ptr<float>();
+  const float* lo = eroded.ptr<float>();
+  for (size_t i = 0; i < depth.data.size(); ++i) {
+    const float z = c[i];
+    const float jump = std::max(hi[i] - z, z - lo[i]);
+    edges->data[i] = uint8_t(z > 0.0f && jump > threshold * z);
   }
 }
 
@@ -120,20 +128,29 @@ namespace {
 void smoothPoints(const PointImage& points, int window, PointImage* smoothed) {
   const int w = points.width, h = points.height;
   resize(smoothed, w, h, Eigen::Vector3f::Zero().eval());
-  cv::Mat p(h, w, CV_32FC3, const_cast<Eigen::Vector3f*>(points.data.data()));
-  cv::Mat valid(h, w, CV_32F);
-  for (int i = 0; i < w * h; ++i) valid.at<float>(i) = points.data[size_t(i)].z() > 0 ? 1.f : 0.f;
-  cv::Mat sum, count;
-  cv::boxFilter(p, sum, CV_32F, cv::Size(window, window), cv::Point(-1, -1), false,
+  const size_t n = size_t(w) * size_t(h);
+  // Four channels (x, y, z, valid) filtered in one pass.
+  thread_local cv::Mat packed, sum;
+  packed.create(h, w, CV_32FC4);
+  const float* p = points.data.data()->data();
+  float* q = packed.ptr<float>();
+  for (size_t i = 0; i < n; ++i) {
+    q[4 * i] = p[3 * i];
+    q[4 * i + 1] = p[3 * i + 1];
+    q[4 * i + 2] = p[3 * i + 2];
+    q[4 * i + 3] = p[3 * i + 2] > 0.0f ? 1.0f : 0.0f;
+  }
+  cv::boxFilter(packed, sum, CV_32F, cv::Size(window, window), cv::Point(-1, -1), false,
                 cv::BORDER_CONSTANT);
-  cv::boxFilter(valid, count, CV_32F, cv::Size(window, window), cv::Point(-1, -1), false,
-                cv::BORDER_CONSTANT);
-  const auto* s = reinterpret_cast<const Eigen::Vector3f*>(sum.ptr<float>());
-  const float* c = count.ptr<float>();
-  for (int i = 0; i < w * h; ++i) {
-    smoothed->data[size_t(i)] =
-        (c[i] > 0.5f && points.data[size_t(i)].z() > 0) ? Eigen::Vector3f(s[i] / c[i])
-                                                         : Eigen::Vector3f::Zero();
+  const float* s = sum.ptr<float>();
+  float* out = smoothed->data.data()->data();
+  for (size_t i = 0; i < n; ++i) {
+    const float c = s[4 * i + 3];
+    const bool ok = c > 0.5f && p[3 * i + 2] > 0.0f;
+    const float inv = ok ? 1.0f / c : 0.0f;
+    out[3 * i] = s[4 * i] * inv;
+    out[3 * i + 1] = s[4 * i + 1] * inv;
+    out[3 * i + 2] = s[4 * i + 2] * inv;
   }
 }
 
@@ -142,34 +159,101 @@ void normalsFromSmoothed(const PointImage& points, const PointImage& smoothed, i
                          float max_relative_distance, NormalImage* normals) {
   const int w = points.width, h = points.height;
   resize(normals, w, h, Eigen::Vector3f::Zero().eval());
-  auto consistent = [&](size_t a, size_t b) {
-    const float za = points.data[a].z(), zb = points.data[b].z();
-    return zb > 0 && std::abs(za - zb) <= max_relative_distance * za;
-  };
+  const float* P = points.data.data()->data();
+  const float* S = smoothed.data.data()->data();
+  float* N = normals->data.data()->data();
+  const size_t row = size_t(w);
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
-      const size_t i = size_t(v) * w + u;
-      Eigen::Vector3f& n = normals->data[i];
-      n.setZero();
-      if (!(points.data[i].z() > 0)) continue;
-      // Horizontal difference, central where both sides are on the same surface.
-      const bool right = u + offset < w && consistent(i, i + offset);
-      const bool left = u - offset >= 0 && consistent(i, i - offset);
-      const bool down = v + offset < h && consistent(i, i + size_t(offset) * w);
-      const bool up = v - offset >= 0 && consistent(i, i - size_t(offset) * w);
+      const size_t i = size_t(v) * row + size_t(u);
+      float* n = N + 3 * i;
+      n[0] = n[1] = n[2] = 0.0f;
+      const float z = P[3 * i + 2];
+      if (!(z > 0.0f)) continue;
+      const float limit = max_relative_distance * z;
+      auto consistent = [&](size_t j) {
+        const float zj = P[3 * j + 2];
+        return zj > 0.0f && std::abs(zj - z) <= limit;
+      };
+      // Central differences where both sides are on the same surface, one-sided otherwise.
+      const bool right = u + offset < w && consistent(i + size_t(offset));
+      const bool left = u >= offset && consistent(i - size_t(offset));
+      const bool down = v + offset < h && consistent(i + size_t(offset) * row);
+      const bool up = v >= offset && consistent(i - size_t(offset) * row);
       if (!(right || left) || !(down || up)) continue;
-      const Eigen::Vector3f& c = smoothed.data[i];
-      const Eigen::Vector3f dx = (right ? smoothed.data[i + offset] : c) -
-                                 (left ? smoothed.data[i - offset] : c);
-      const Eigen::Vector3f dy = (down ? smoothed.data[i + size_t(offset) * w] : c) -
-                                 (up ? smoothed.data[i - size_t(offset) * w] : c);
-      Eigen::Vector3f cross = dx.cross(dy);
-      const float len = cross.norm();
-      if (!(len > 1e-12f)) continue;
-      cross /= len;
-      if (cross.dot(c) > 0.0f) cross = -cross;  // toward the camera
-      n = cross;
+      const float* c = S + 3 * i;
+      const float* r = right ? S + 3 * (i + size_t(offset)) : c;
+      const float* l = left ? S + 3 * (i - size_t(offset)) : c;
+      const float* d = down ? S + 3 * (i + size_t(offset) * row) : c;
+      const float* t = up ? S + 3 * (i - size_t(offset) * row) : c;
+      const float dx0 = r[0] - l[0], dx1 = r[1] - l[1], dx2 = r[2] - l[2];
+      const float dy0 = d[0] - t[0], dy1 = d[1] - t[1], dy2 = d[2] - t[2];
+      float n0 = dx1 * dy2 - dx2 * dy1;
+      float n1 = dx2 * dy0 - dx0 * dy2;
+      float n2 = dx0 * dy1 - dx1 * dy0;
+      const float len2 = n0 * n0 + n1 * n1 + n2 * n2;
+      if (!(len2 > 1e-24f)) continue;
+      float inv = 1.0f / std::sqrt(len2);
+      if (n0 * c[0] + n1 * c[1] + n2 * c[2] > 0.0f) inv = -inv;  // toward the camera
+      n[0] = n0 * inv;
+      n[1] = n1 * inv;
+      n[2] = n2 * inv;
     }
+  }
+}
+
+// Grows labels into unlabelled measured pixels (see DepthSegmenter::segment).
+void growLabels(const DepthImage& depth, const PointImage& points, const NormalImage& normals,
+                int iterations, float max_distance, LabelImage* labels) {
+  const int w = depth.width, h = depth.height;
+  int32_t* L = labels->data.data();
+  // Only pixels with a normal join a segment: segments promise unit normals.
+  auto unlabelled = [&](size_t i) {
+    const Eigen::Vector3f& n = normals.data[i];
+    return L[i] == 0 && depth.data[i] > 0.0f && (n.x() != 0.0f || n.y() != 0.0f || n.z() != 0.0f);
+  };
+  std::vector<uint32_t> frontier, next;
+  std::vector<std::pair<uint32_t, int32_t>> changes;
+  std::vector<uint8_t> queued(size_t(w) * size_t(h), 0);
+  auto push_neighbours = [&](size_t i, std::vector<uint32_t>* out) {
+    const int u = int(i % size_t(w)), v = int(i / size_t(w));
+    const int nu[4] = {u - 1, u + 1, u, u}, nv[4] = {v, v, v - 1, v + 1};
+    for (int d = 0; d < 4; ++d) {
+      if (nu[d] < 0 || nv[d] < 0 || nu[d] >= w || nv[d] >= h) continue;
+      const size_t j = size_t(nv[d]) * size_t(w) + size_t(nu[d]);
+      if (unlabelled(j) && !queued[j]) {
+        queued[j] = 1;
+        out->push_back(uint32_t(j));
+      }
+    }
+  };
+  for (size_t i = 0; i < queued.size(); ++i) {
+    if (L[i] != 0) push_neighbours(i, &frontier);
+  }
+  for (int it = 0; it < iterations && !frontier.empty(); ++it) {
+    changes.clear();
+    for (uint32_t i : frontier) {
+      queued[i] = 0;
+      const int u = int(i % uint32_t(w)), v = int(i / uint32_t(w));
+      const int nu[4] = {u - 1, u + 1, u, u}, nv[4] = {v, v, v - 1, v + 1};
+      int32_t best = 0;
+      float best_gap = max_distance;
+      for (int d = 0; d < 4; ++d) {
+        if (nu[d] < 0 || nv[d] < 0 || nu[d] >= w || nv[d] >= h) continue;
+        const size_t j = size_t(nv[d]) * size_t(w) + size_t(nu[d]);
+        if (L[j] == 0) continue;
+        const float gap = (points.data[j] - points.data[i]).norm();
+        if (gap <= best_gap) {
+          best_gap = gap;
+          best = L[j];
+        }
+      }
+      if (best != 0) changes.emplace_back(i, best);
+    }
+    for (const auto& [i, label] : changes) L[i] = label;
+    next.clear();
+    for (const auto& [i, label] : changes) push_neighbours(i, &next);
+    frontier.swap(next);
   }
 }
 
@@ -178,36 +262,48 @@ void normalsFromSmoothed(const PointImage& points, const PointImage& smoothed, i
 void computeNormals(const PointImage& points, int window, float max_relative_distance,
                     NormalImage* normals) {
   PointImage smoothed;
-  smoothPoints(points, window, &smoothed);
-  normalsFromSmoothed(points, smoothed, std::max(1, window / 4), max_relative_distance, normals);
+  smoothPoints(points, smoothingWindow(window), &smoothed);
+  normalsFromSmoothed(points, smoothed, differenceOffset(window), max_relative_distance, normals);
 }
 
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
-                  float offset_m, Image<float>* convexity) {
+                  float offset_m, float max_relative_jump, Image<float>* convexity) {
   const int w = points.width, h = points.height, k = std::max(1, window / 2);
   resize(convexity, w, h, 1.0f);
-  const int du[8] = {k, -k, 0, 0, k, -k, k, -k};
-  const int dv[8] = {0, 0, k, -k, k, -k, -k, k};
+  std::fill(convexity->data.begin(), convexity->data.end(), 1.0f);
+  // Each pair (i, j) is visited once, from its first pixel, and its value lowers both pixels'
+  // minimum: 4 forward directions cover the 8-neighbourhood at distance k.
+  const int du[4] = {k, 0, k, -k};
+  const int dv[4] = {0, k, k, k};
+  const float* P = points.data.data()->data();
+  const float* N = normals.data.data()->data();
+  float* C = convexity->data.data();
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const size_t i = size_t(v) * w + u;
-      const Eigen::Vector3f& n = normals.data[i];
-      float min_convexity = 1.0f;
-      if (n.z() != 0.0f || n.x() != 0.0f || n.y() != 0.0f) {
-        const Eigen::Vector3f& p = points.data[i];
-        for (int d = 0; d < 8; ++d) {
-          const int uu = u + du[d], vv = v + dv[d];
-          if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
-          const size_t j = size_t(vv) * w + uu;
-          const Eigen::Vector3f& nj = normals.data[j];
-          if (nj.isZero()) continue;
-          // Neighbour in front of the tangent plane (toward the camera): a concave bend.
-          if ((points.data[j] - p).dot(n) > offset_m) {
-            min_convexity = std::min(min_convexity, n.dot(nj));
-          }
-        }
+      const float* n = N + 3 * i;
+      if (n[0] == 0.0f && n[1] == 0.0f && n[2] == 0.0f) continue;
+      const float* p = P + 3 * i;
+      for (int d = 0; d < 4; ++d) {
+        const int uu = u + du[d], vv = v + dv[d];
+        if (uu < 0 || uu >= w || vv >= h) continue;
+        const size_t j = size_t(vv) * w + size_t(uu);
+        const float* nj = N + 3 * j;
+        if (nj[0] == 0.0f && nj[1] == 0.0f && nj[2] == 0.0f) continue;
+        const float* pj = P + 3 * j;
+        // Pairs across a depth jump belong to the discontinuity map, not to convexity.
+        if (std::abs(pj[2] - p[2]) > max_relative_jump * p[2]) continue;
+        const float e0 = pj[0] - p[0], e1 = pj[1] - p[1], e2 = pj[2] - p[2];
+        // Normals converge along a concave bend and diverge along a convex one:
+        // (n_j − n_i)·(p_j − p_i) < 0 is concave. Symmetric in i and j, so a normal that leans
+        // across a nearby convex edge does not fake a concavity.
+        const bool concave =
+            (nj[0] - n[0]) * e0 + (nj[1] - n[1]) * e1 + (nj[2] - n[2]) * e2 < -offset_m;
+        if (!concave) continue;
+        const float dot = n[0] * nj[0] + n[1] * nj[1] + n[2] * nj[2];
+        C[i] = std::min(C[i], dot);
+        C[j] = std::min(C[j], dot);
       }
-      convexity->data[i] = min_convexity;
     }
   }
 }
@@ -217,7 +313,9 @@ DepthSegmenter::DepthSegmenter(const SegmentationParams& params, const Intrinsic
   const double area_ratio =
       double(intrinsics.width) * intrinsics.height / (double(kVgaWidth) * 480.0);
   min_segment_px_ = std::max(1, int(std::lround(params.min_segment_px * area_ratio)));
-  params_.normal_window_px = scaledWindow(params.normal_window_px, intrinsics.width);
+  // Normals need a minimum support whatever the resolution: depth noise is per pixel.
+  params_.normal_window_px = std::max(std::min(params.normal_window_px, kMinNormalWindow),
+                                      scaledWindow(params.normal_window_px, intrinsics.width));
   params_.convexity_window_px = scaledWindow(params.convexity_window_px, intrinsics.width);
   params_.discontinuity_window_px = std::max(3, params.discontinuity_window_px);
 }
@@ -267,23 +365,25 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
 
   t = Clock::now();
   PointImage& smoothed = smoothed_;
-  smoothPoints(points_, params_.normal_window_px, &smoothed);
-  normalsFromSmoothed(points_, smoothed, std::max(1, params_.normal_window_px / 4),
+  smoothPoints(points_, smoothingWindow(params_.normal_window_px), &smoothed);
+  normalsFromSmoothed(points_, smoothed, differenceOffset(params_.normal_window_px),
                       params_.normal_max_relative_distance, &normals_);
   result.timings.normals_ms = msSince(t);
 
   t = Clock::now();
   // Smoothed points: the tangent-plane test must not flip with per-pixel noise.
   convexityMap(smoothed, normals_, params_.convexity_window_px, params_.convexity_offset_m,
-               &convexity_);
+               params_.normal_max_relative_distance, &convexity_);
   result.timings.convexity_ms = msSince(t);
 
   t = Clock::now();
   resize(&boundaries_, w, h, uint8_t{0});
   cv::Mat free_space(h, w, CV_8U);
   for (size_t i = 0; i < n_pixels; ++i) {
+    const Eigen::Vector3f& n = normals_.data[i];
     const bool boundary = !(depth_.data[i] > 0.0f) || edges_.data[i] != 0 ||
-                          convexity_.data[i] < params_.convexity_threshold;
+                          convexity_.data[i] < params_.convexity_threshold ||
+                          (n.x() == 0.0f && n.y() == 0.0f && n.z() == 0.0f);
     boundaries_.data[i] = boundary ? 1 : 0;
     free_space.data[i] = boundary ? 0 : 1;
   }
@@ -302,38 +402,10 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   const int32_t* comp = components.ptr<int32_t>();
   for (size_t i = 0; i < n_pixels; ++i) result.labels.data[i] = final_label[size_t(comp[i])];
 
-  // Grow labels into thin boundary pixels whose depth is close to a labelled neighbour's.
-  std::vector<uint32_t> frontier, changed;
-  for (int it = 0; it < params_.label_growth_iterations; ++it) {
-    changed.clear();
-    for (int v = 0; v < h; ++v) {
-      for (int u = 0; u < w; ++u) {
-        const size_t i = size_t(v) * w + u;
-        const float z = depth_.data[i];
-        if (result.labels.data[i] != 0 || !(z > 0.0f)) continue;
-        int32_t best = 0;
-        float best_gap = params_.max_label_growth_distance_m;
-        const int nu[4] = {u - 1, u + 1, u, u}, nv[4] = {v, v, v - 1, v + 1};
-        for (int d = 0; d < 4; ++d) {
-          if (nu[d] < 0 || nv[d] < 0 || nu[d] >= w || nv[d] >= h) continue;
-          const size_t j = size_t(nv[d]) * w + nu[d];
-          const int32_t l = result.labels.data[j];
-          if (l == 0) continue;
-          const float gap = (points_.data[j] - points_.data[i]).norm();
-          if (gap <= best_gap) {
-            best_gap = gap;
-            best = l;
-          }
-        }
-        if (best != 0) {
-          changed.push_back(uint32_t(i));
-          changed.push_back(uint32_t(best));
-        }
-      }
-    }
-    if (changed.empty()) break;
-    for (size_t c = 0; c < changed.size(); c += 2) result.labels.data[changed[c]] = int32_t(changed[c + 1]);
-  }
+  // Grow labels into boundary pixels whose 3D point is close to a labelled neighbour's, one ring
+  // per pass; each pass looks only at the frontier the previous pass created.
+  growLabels(depth_, points_, normals_, params_.label_growth_iterations,
+             params_.max_label_growth_distance_m, &result.labels);
   result.timings.labels_ms = msSince(t);
 
   t = Clock::now();

@@ -38,19 +38,20 @@ void depthToPoints(const DepthImage& depth, const Intrinsics& intrinsics, PointI
 // window × window neighbourhood exceeds `threshold` · depth (relative jump).
 void discontinuityMap(const DepthImage& depth, int window, float threshold, MaskImage* edges);
 
-// Normals from the pixel neighbourhood: the point image is box-filtered over `window` × `window`
-// pixels (valid, depth-consistent pixels only) and the normal is the cross product of central
-// differences of the smoothed points `window / 2` pixels apart, falling back to one-sided
+// Normals from the pixel neighbourhood: the point image is box-filtered over about window/3
+// pixels (valid pixels only) and the normal is the cross product of central differences of the
+// smoothed points window/3 pixels apart, falling back to one-sided
 // differences across a depth jump of more than `max_relative_distance` · z. A plane gives its
 // exact normal; noise is averaged over the window.
 void computeNormals(const PointImage& points, int window, float max_relative_distance,
                     NormalImage* normals);
 
-// Min-convexity map in [−1, 1]: for each pixel, the minimum over neighbours within
-// `window` / 2 pixels (8 directions) of 1 where the neighbour lies behind the tangent plane (or
-// within `offset_m` of it: convex or flat), else the dot product of the two normals (concave).
+// Min-convexity map in [−1, 1]: for each pixel, the minimum over its neighbours `window` / 2
+// pixels away in 8 directions of 1 where the pair is convex or flat, else (concave:
+// (n_j − n_i)·(p_j − p_i) < −offset_m, the normals converge) the dot product of the two normals. Pairs whose depths differ by more than `max_relative_jump` · z are skipped
+// (depth jumps are the discontinuity map's business).
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
-                  float offset_m, Image<float>* convexity);
+                  float offset_m, float max_relative_jump, Image<float>* convexity);
 
 // Segments of one frame.
 struct Segment {

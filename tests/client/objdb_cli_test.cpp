@@ -33,7 +33,8 @@ TEST(ObjdbCli, HelpListsEverySubcommandAndExitsZero) {
     const ProcessResult result = runProcess({kObjdb, help});
     EXPECT_EQ(result.exit_code, 0) << help << "\n" << result.err;
     EXPECT_TRUE(contains(result.out, "usage: objdb <command>")) << result.out;
-    for (const char* command : {"\n  health ", "\n  sim ", "\n  info ", "\n  help "}) {
+    for (const char* command :
+         {"\n  health ", "\n  sim ", "\n  info ", "\n  segment ", "\n  help "}) {
       EXPECT_TRUE(contains(result.out, command)) << command << " missing in\n" << result.out;
     }
   }
