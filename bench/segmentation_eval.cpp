@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <string>
 #include <thread>
 #include <vector>
@@ -24,6 +25,7 @@ namespace {
 struct Sample {
   Frame frame;
   std::set<uint16_t> structure;
+  std::map<uint16_t, std::string> kind;
 };
 
 std::vector<Sample> renderFrames(const std::string& camera, bool noise, int per_session) {
@@ -37,19 +39,27 @@ std::vector<Sample> renderFrames(const std::string& camera, bool noise, int per_
     const auto poses = sim::sampleTrajectory(scene.trajectory).value();
     const sim::Renderer renderer(scene.intrinsics);
     std::set<uint16_t> structure;
+    std::map<uint16_t, std::string> kind;
     for (const auto& o : scene.objects) {
       if (o.structure) structure.insert(uint16_t(o.id));
+      kind[uint16_t(o.id)] = o.category;
     }
     const size_t step = std::max<size_t>(1, poses.size() / size_t(per_session));
     for (size_t i = 0; i < poses.size(); i += step) {
-      samples.push_back({sim::renderFrame(scene, built, renderer, poses[i], i, false), structure});
+      samples.push_back(
+          {sim::renderFrame(scene, built, renderer, poses[i], i, false), structure, kind});
     }
   }
   return samples;
 }
 
+struct KindScore {
+  double weighted_iou = 0.0, pixels = 0.0;
+};
+
 struct RunResult {
   segmentation::QualityCounts quality;
+  std::map<std::string, KindScore> per_kind;
   segmentation::SegmentationTimings timings;  // mean per frame
   double throughput_fps = 0;
 };
@@ -63,7 +73,14 @@ RunResult run(const std::vector<Sample>& samples, const Intrinsics& k, int threa
     auto result = segmenter.segment(s.frame.depth).value();
     segmentation::QualityOptions qo;
     qo.structure_ids = s.structure;
-    r.quality.add(segmentation::evaluateSegmentation(result.labels, *s.frame.instances, qo));
+    std::map<uint16_t, segmentation::ObjectScore> scores;
+    r.quality.add(
+        segmentation::evaluateSegmentation(result.labels, *s.frame.instances, qo, &scores));
+    for (const auto& [id, score] : scores) {
+      KindScore& k = r.per_kind[s.kind.at(id)];
+      k.weighted_iou += score.best_iou * double(score.pixels);
+      k.pixels += double(score.pixels);
+    }
     auto& t = r.timings;
     t.points_ms += result.timings.points_ms;
     t.discontinuity_ms += result.timings.discontinuity_ms;
@@ -145,6 +162,7 @@ int main(int argc, char** argv) {
               "noise", "points", "disc", "normal", "convex", "labels", "segs", "total",
               "fps(1)", ("fps(" + std::to_string(threads) + ")").c_str(), "coverage", "under%",
               "seg/obj");
+  std::vector<std::pair<std::string, std::map<std::string, KindScore>>> per_kind_rows;
   for (const auto& camera : list) {
     const Intrinsics k = intrinsicsPreset(camera).value();
     for (bool noise : {true, false}) {
@@ -158,6 +176,22 @@ int main(int argc, char** argv) {
           t.convexity_ms, t.labels_ms, t.segments_ms, t.total_ms, 1000.0 / t.total_ms,
           r.throughput_fps, r.quality.coverage(), 100.0 * r.quality.underSegmentationRate(),
           r.quality.segmentsPerObject());
+      per_kind_rows.push_back({camera + (noise ? " noisy" : " clean"), r.per_kind});
+    }
+  }
+  std::printf("\nCoverage per object kind (size-weighted best-segment IoU):\n%-18s", "kind");
+  for (const auto& [name, kinds] : per_kind_rows) std::printf(" %12s", name.c_str());
+  std::printf("\n");
+  if (!per_kind_rows.empty()) {
+    for (const auto& [kind, unused] : per_kind_rows.front().second) {
+      std::printf("%-18s", kind.c_str());
+      for (const auto& [name, kinds] : per_kind_rows) {
+        const auto it = kinds.find(kind);
+        std::printf(" %12.3f", it == kinds.end() || it->second.pixels == 0
+                                   ? 0.0
+                                   : it->second.weighted_iou / it->second.pixels);
+      }
+      std::printf("\n");
     }
   }
   std::printf("\nTimes in ms per frame, one thread; fps(N) = throughput with N segmenters.\n"

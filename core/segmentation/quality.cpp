@@ -16,7 +16,8 @@ void QualityCounts::add(const QualityCounts& o) {
 }
 
 QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage& instances,
-                                   const QualityOptions& options) {
+                                   const QualityOptions& options,
+                                   std::map<uint16_t, ObjectScore>* scores) {
   QualityCounts q;
   // Overlap table (segment, instance) → pixels, plus per-segment and per-instance totals.
   std::map<std::pair<int32_t, uint16_t>, size_t> overlap;
@@ -64,6 +65,7 @@ QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage
     ++q.objects;
     q.object_pixels += double(size);
     q.weighted_iou += double(size) * best_iou[g];
+    if (scores) (*scores)[g] = ObjectScore{best_iou[g], size};
   }
   return q;
 }

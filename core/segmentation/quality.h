@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <set>
 
 #include "core/common/image.h"
@@ -34,8 +35,14 @@ struct QualityOptions {
   int min_object_pixels = 50;        // smaller ground-truth objects in a frame are not scored
 };
 
-// Scores one frame's labels (0 = none) against its instance mask (0 = none).
+// Scores one frame's labels (0 = none) against its instance mask (0 = none). `best_iou`
+// (optional) receives each scored object's best IoU and pixel count.
+struct ObjectScore {
+  double best_iou = 0.0;
+  size_t pixels = 0;
+};
 QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage& instances,
-                                   const QualityOptions& options);
+                                   const QualityOptions& options,
+                                   std::map<uint16_t, ObjectScore>* best_iou = nullptr);
 
 }  // namespace objdb::segmentation
