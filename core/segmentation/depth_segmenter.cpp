@@ -227,8 +227,18 @@ void growLabels(const DepthImage& depth, const PointImage& points, const NormalI
       }
     }
   };
-  for (size_t i = 0; i < queued.size(); ++i) {
-    if (L[i] != 0) push_neighbours(i, &frontier);
+  // The first frontier: growable pixels with a labelled 4-neighbour.
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const size_t i = size_t(v) * size_t(w) + size_t(u);
+      if (!unlabelled(i)) continue;
+      const bool touches = (u > 0 && L[i - 1] != 0) || (u + 1 < w && L[i + 1] != 0) ||
+                           (v > 0 && L[i - size_t(w)] != 0) || (v + 1 < h && L[i + size_t(w)] != 0);
+      if (touches) {
+        queued[i] = 1;
+        frontier.push_back(uint32_t(i));
+      }
+    }
   }
   for (int it = 0; it < iterations && !frontier.empty(); ++it) {
     changes.clear();
@@ -278,18 +288,20 @@ void convexityMap(const PointImage& points, const NormalImage& normals, int wind
   const float* P = points.data.data()->data();
   const float* N = normals.data.data()->data();
   float* C = convexity->data.data();
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const size_t i = size_t(v) * w + u;
-      const float* n = N + 3 * i;
-      if (n[0] == 0.0f && n[1] == 0.0f && n[2] == 0.0f) continue;
-      const float* p = P + 3 * i;
-      for (int d = 0; d < 4; ++d) {
-        const int uu = u + du[d], vv = v + dv[d];
-        if (uu < 0 || uu >= w || vv >= h) continue;
-        const size_t j = size_t(vv) * w + size_t(uu);
+  // Direction outermost and exact row ranges: the inner loop has no bounds checks.
+  for (int d = 0; d < 4; ++d) {
+    const ptrdiff_t step = ptrdiff_t(dv[d]) * w + du[d];
+    const int u_begin = std::max(0, -du[d]), u_end = std::min(w, w - du[d]);
+    for (int v = 0; v + dv[d] < h; ++v) {
+      for (int u = u_begin; u < u_end; ++u) {
+        const size_t i = size_t(v) * size_t(w) + size_t(u);
+        const size_t j = size_t(ptrdiff_t(i) + step);
+        const float* n = N + 3 * i;
         const float* nj = N + 3 * j;
-        if (nj[0] == 0.0f && nj[1] == 0.0f && nj[2] == 0.0f) continue;
+        // A zero normal (unknown) has n[2] == 0: normals toward the camera have n[2] < 0
+        // except at exactly grazing angles, which are boundaries anyway.
+        if (n[2] == 0.0f || nj[2] == 0.0f) continue;
+        const float* p = P + 3 * i;
         const float* pj = P + 3 * j;
         // Pairs across a depth jump belong to the discontinuity map, not to convexity.
         if (std::abs(pj[2] - p[2]) > max_relative_jump * p[2]) continue;
@@ -297,9 +309,7 @@ void convexityMap(const PointImage& points, const NormalImage& normals, int wind
         // Normals converge along a concave bend and diverge along a convex one:
         // (n_j − n_i)·(p_j − p_i) < 0 is concave. Symmetric in i and j, so a normal that leans
         // across a nearby convex edge does not fake a concavity.
-        const bool concave =
-            (nj[0] - n[0]) * e0 + (nj[1] - n[1]) * e1 + (nj[2] - n[2]) * e2 < -offset_m;
-        if (!concave) continue;
+        if ((nj[0] - n[0]) * e0 + (nj[1] - n[1]) * e1 + (nj[2] - n[2]) * e2 >= -offset_m) continue;
         const float dot = n[0] * nj[0] + n[1] * nj[1] + n[2] * nj[2];
         C[i] = std::min(C[i], dot);
         C[j] = std::min(C[j], dot);
