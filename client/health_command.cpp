@@ -8,6 +8,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_format.h"
+#include "client/cli_util.h"
 #include "client/commands.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
@@ -30,10 +31,7 @@ exit status: 0 SERVING; 1 NOT_SERVING, unknown service, server unreachable or no
 2 command-line error.
 )";
 
-int usageError(const std::string& message) {
-  std::fprintf(stderr, "objdb health: %s\n\n%s", message.c_str(), kUsage);
-  return 2;
-}
+int usageError(const std::string& message) { return cli::usageError("health", message, kUsage); }
 
 }  // namespace
 

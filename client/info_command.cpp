@@ -11,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/progress.h"
 #include "core/io/dataset.h"
@@ -173,22 +174,20 @@ int runInfoCommand(int argc, char** argv) {
       return 0;
     } else if (a == "--no-visibility") {
       visibility = false;
-    } else if (a == "--min-pixels" && i + 1 < argc) {
-      min_pixels = std::atoi(argv[++i]);
-      if (min_pixels <= 0) {
-        std::fprintf(stderr, "objdb info: --min-pixels needs a positive integer\n");
-        return 2;
+    } else if (a == "--min-pixels") {
+      long long n = 0;
+      if (i + 1 >= argc || !cli::parseInt(argv[++i], 1, 1 << 26, &n)) {
+        return cli::usageError("info", "--min-pixels needs a positive integer", kUsage);
       }
+      min_pixels = int(n);
     } else if (!a.empty() && a[0] != '-' && path.empty()) {
       path = a;
     } else {
-      std::fprintf(stderr, "objdb info: unexpected argument '%s'\n\n%s", a.c_str(), kUsage);
-      return 2;
+      return cli::usageError("info", "unexpected argument '" + a + "'", kUsage);
     }
   }
   if (path.empty()) {
-    std::fprintf(stderr, "objdb info: a dataset PATH is required\n\n%s", kUsage);
-    return 2;
+    return cli::usageError("info", "a dataset PATH is required", kUsage);
   }
   if (!fs::is_directory(path)) {
     std::fprintf(stderr, "objdb info: %s is not a folder\n", path.c_str());

@@ -18,6 +18,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "client/cli_util.h"
 #include "client/commands.h"
 #include "core/common/params_io.h"
 #include "core/io/dataset.h"
@@ -58,24 +59,10 @@ struct SegmentArgs {
   long long frame = -1;
 };
 
-int usageError(const std::string& message) {
-  std::fprintf(stderr, "objdb segment: %s\n\n%s", message.c_str(), kUsage);
-  return 2;
-}
+int usageError(const std::string& message) { return cli::usageError("segment", message, kUsage); }
 
-int reportError(const Status& status) {
-  std::fprintf(stderr, "objdb segment: %s\n", std::string(status.message()).c_str());
-  return 1;
-}
+int reportError(const Status& status) { return cli::reportError("segment", status); }
 
-bool parseInt(const char* text, long long lo, long long hi, long long* out) {
-  char* end = nullptr;
-  errno = 0;
-  const long long v = std::strtoll(text, &end, 10);
-  if (errno != 0 || end == text || *end != '\0' || v < lo || v > hi) return false;
-  *out = v;
-  return true;
-}
 
 // --- Pictures (BGR for OpenCV)
 // --------------------------------------------------------------------
@@ -193,7 +180,7 @@ int runSegmentCommand(int argc, char** argv) {
       args.out = v;
     } else if (a == "--config") {
       args.config = v;
-    } else if (!parseInt(v, 0, 1LL << 40, &args.frame)) {
+    } else if (!cli::parseInt(v, 0, 1LL << 40, &args.frame)) {
       return usageError(std::string("--frame needs a non-negative integer, got \"") + v + "\"");
     }
   }

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/progress.h"
 #include "core/io/mesh_io.h"
@@ -49,24 +50,10 @@ struct SimArgs {
   int threads = 2;
 };
 
-bool parseInt(const char* text, long long lo, long long hi, long long* out) {
-  char* end = nullptr;
-  errno = 0;
-  const long long v = std::strtoll(text, &end, 10);
-  if (errno != 0 || end == text || *end != '\0' || v < lo || v > hi) return false;
-  *out = v;
-  return true;
-}
 
-int usageError(const std::string& message) {
-  std::fprintf(stderr, "objdb sim: %s\n\n%s", message.c_str(), kUsage);
-  return 2;
-}
+int usageError(const std::string& message) { return cli::usageError("sim", message, kUsage); }
 
-int reportError(const Status& status) {
-  std::fprintf(stderr, "objdb sim: %s\n", std::string(status.message()).c_str());
-  return 1;
-}
+int reportError(const Status& status) { return cli::reportError("sim", status); }
 
 int runScenes(const std::vector<sim::Scene>& scenes, const std::filesystem::path& out,
               bool multi_session, const SimArgs& args) {
@@ -133,16 +120,16 @@ int runSimCommand(int argc, char** argv) {
                          : args.export_dir) = v;
     } else if (a == "--frames") {
       const char* v = value("--frames");
-      if (!v || !parseInt(v, 1, 1000000, &n)) return usageError("--frames needs an integer 1..1000000");
+      if (!v || !cli::parseInt(v, 1, 1000000, &n)) return usageError("--frames needs an integer 1..1000000");
       args.frames = int(n);
     } else if (a == "--seed") {
       const char* v = value("--seed");
-      if (!v || !parseInt(v, 0, (1LL << 62), &n)) return usageError("--seed needs a non-negative integer");
+      if (!v || !cli::parseInt(v, 0, (1LL << 62), &n)) return usageError("--seed needs a non-negative integer");
       args.seed = uint64_t(n);
       args.seed_set = true;
     } else if (a == "--threads") {
       const char* v = value("--threads");
-      if (!v || !parseInt(v, 1, 64, &n)) return usageError("--threads needs an integer 1..64");
+      if (!v || !cli::parseInt(v, 1, 64, &n)) return usageError("--threads needs an integer 1..64");
       args.threads = int(n);
     } else if (a == "--no-noise") {
       args.noise = false;
