@@ -192,7 +192,7 @@ StatusOr<std::unique_ptr<ObjdbDataset>> ObjdbDataset::open(const fs::path& root,
   if (fs::exists(objects_path, ec)) {
     OBJDB_ASSIGN_OR_RETURN(dataset->objects_, readObjectsJson(objects_path));
   }
-  logger("io")->info("opened objdb dataset {}: {} frames{}{}, {} ground-truth objects, {}",
+  logger("io")->debug("opened objdb dataset {}: {} frames{}{}, {} ground-truth objects, {}",
                      root.string(), dataset->poses_.size(), dataset->has_color_ ? ", colour" : "",
                      dataset->has_instances_ ? ", instances" : "", dataset->objects_.size(),
                      toString(dataset->intrinsics_));

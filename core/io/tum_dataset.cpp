@@ -212,7 +212,7 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
     }
     dataset->frames_.push_back(std::move(frame));
   }
-  logger("io")->info(
+  logger("io")->debug(
       "opened TUM dataset {}: {} frames ({} depth images without a pose within {} s skipped, {} "
       "frames without colour), {}",
       root.string(), dataset->frames_.size(), dataset->frames_without_pose_, max_dt, without_color,
