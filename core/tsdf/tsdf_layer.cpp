@@ -1,0 +1,85 @@
+#include "core/tsdf/tsdf_layer.h"
+
+#include <cmath>
+
+namespace objdb::tsdf {
+namespace {
+int floorDiv(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+}  // namespace
+
+StatusOr<TsdfLayer> TsdfLayer::create(float voxel_size, int voxels_per_side) {
+  if (!(std::isfinite(voxel_size) && voxel_size >= 0.001f && voxel_size <= 1.0f)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("TSDF voxel size must be in [0.001, 1] m (got %g)", voxel_size));
+  }
+  if (!(voxels_per_side >= 2 && voxels_per_side <= 64)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "TSDF voxels per block side must be in [2, 64] (got %d)", voxels_per_side));
+  }
+  return TsdfLayer(voxel_size, voxels_per_side);
+}
+
+TsdfLayer::TsdfLayer(float voxel_size, int voxels_per_side)
+    : voxel_size_(voxel_size),
+      vps_(voxels_per_side),
+      block_size_(voxel_size * float(voxels_per_side)),
+      inv_voxel_size_(1.0f / voxel_size),
+      inv_block_size_(1.0f / (voxel_size * float(voxels_per_side))) {}
+
+BlockIndex TsdfLayer::blockOfVoxel(const VoxelIndex& v) const {
+  return {floorDiv(v.x(), vps_), floorDiv(v.y(), vps_), floorDiv(v.z(), vps_)};
+}
+
+size_t TsdfLayer::linearInBlock(const VoxelIndex& v) const {
+  const BlockIndex b = blockOfVoxel(v);
+  const Eigen::Vector3i local = v - b * vps_;
+  return size_t(local.x()) + size_t(vps_) * (size_t(local.y()) + size_t(vps_) * size_t(local.z()));
+}
+
+TsdfBlock* TsdfLayer::block(const BlockIndex& b) {
+  const auto it = blocks_.find(b);
+  return it == blocks_.end() ? nullptr : it->second.get();
+}
+
+const TsdfBlock* TsdfLayer::block(const BlockIndex& b) const {
+  const auto it = blocks_.find(b);
+  return it == blocks_.end() ? nullptr : it->second.get();
+}
+
+TsdfBlock& TsdfLayer::allocateBlock(const BlockIndex& b) {
+  auto& slot = blocks_[b];
+  if (!slot) slot = std::make_unique<TsdfBlock>(vps_);
+  return *slot;
+}
+
+const TsdfVoxel* TsdfLayer::voxel(const VoxelIndex& v) const {
+  const TsdfBlock* b = block(blockOfVoxel(v));
+  return b ? &b->voxel(linearInBlock(v)) : nullptr;
+}
+
+TsdfVoxel* TsdfLayer::voxel(const VoxelIndex& v) {
+  TsdfBlock* b = block(blockOfVoxel(v));
+  return b ? &b->voxel(linearInBlock(v)) : nullptr;
+}
+
+bool TsdfLayer::interpolateDistance(const Eigen::Vector3f& p, float* distance) const {
+  // Voxel centres sit at (i + 0.5) · voxel_size: shift so the lower corner index is floor().
+  const Eigen::Vector3f q = p * inv_voxel_size_ - Eigen::Vector3f::Constant(0.5f);
+  const Eigen::Vector3f lower = q.array().floor();
+  const Eigen::Vector3f f = q - lower;
+  const VoxelIndex base = lower.cast<int>();
+  float result = 0.0f;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Eigen::Vector3i offset(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
+    const TsdfVoxel* v = voxel(base + offset);
+    if (v == nullptr || !(v->weight > 0.0f)) return false;
+    const float wx = offset.x() ? f.x() : 1.0f - f.x();
+    const float wy = offset.y() ? f.y() : 1.0f - f.y();
+    const float wz = offset.z() ? f.z() : 1.0f - f.z();
+    result += wx * wy * wz * v->distance;
+  }
+  *distance = result;
+  return true;
+}
+
+}  // namespace objdb::tsdf

@@ -1,0 +1,89 @@
+#include "core/tsdf/tsdf_layer.h"
+
+#include <cmath>
+#include <random>
+
+#include <gtest/gtest.h>
+
+namespace objdb::tsdf {
+namespace {
+
+TEST(TsdfLayer, CreateRejectsAbsurdSizesNamingThem) {
+  for (float size : {0.0f, -0.01f, 2.0f, std::nanf("")}) {
+    auto layer = TsdfLayer::create(size, 8);
+    ASSERT_FALSE(layer.ok()) << size;
+    EXPECT_NE(layer.status().message().find("voxel size"), absl::string_view::npos);
+  }
+  EXPECT_FALSE(TsdfLayer::create(0.02f, 1).ok());
+  EXPECT_FALSE(TsdfLayer::create(0.02f, 100).ok());
+  EXPECT_TRUE(TsdfLayer::create(0.02f, 8).ok());
+}
+
+TEST(TsdfLayer, IndicesAreFloorBasedIncludingNegativeCoordinates) {
+  TsdfLayer layer = TsdfLayer::create(0.1f, 4).value();
+  EXPECT_EQ(layer.blockIndexOf({0.05f, 0.39f, 0.41f}), BlockIndex(0, 0, 1));
+  EXPECT_EQ(layer.blockIndexOf({-0.01f, -0.4f, -0.41f}), BlockIndex(-1, -1, -2));
+  EXPECT_EQ(layer.voxelIndexOf({-0.01f, 0.0f, 0.25f}), VoxelIndex(-1, 0, 2));
+  EXPECT_EQ(layer.blockOfVoxel({-1, -4, -5}), BlockIndex(-1, -1, -2));
+  EXPECT_EQ(layer.blockOfVoxel({3, 4, 0}), BlockIndex(0, 1, 0));
+  // Every voxel of a block maps to a distinct slot.
+  std::vector<int> seen(64, 0);
+  for (int z = -4; z < 0; ++z) {
+    for (int y = -4; y < 0; ++y) {
+      for (int x = -4; x < 0; ++x) ++seen[layer.linearInBlock({x, y, z})];
+    }
+  }
+  for (int count : seen) EXPECT_EQ(count, 1);
+  EXPECT_TRUE(layer.voxelCenter({-1, 0, 2}).isApprox(Eigen::Vector3f(-0.05f, 0.05f, 0.25f)));
+}
+
+TEST(TsdfLayer, AllocationAndLookup) {
+  TsdfLayer layer = TsdfLayer::create(0.02f, 8).value();
+  EXPECT_EQ(layer.voxel({1, 2, 3}), nullptr);
+  layer.allocateBlock({0, 0, 0});
+  ASSERT_NE(layer.voxel({1, 2, 3}), nullptr);
+  layer.voxel({1, 2, 3})->distance = 0.5f;
+  EXPECT_EQ(layer.block({0, 0, 0})->voxel(1 + 8 * (2 + 8 * 3)).distance, 0.5f);
+  layer.allocateBlock({0, 0, 0});  // allocating again keeps the data
+  EXPECT_EQ(layer.voxel({1, 2, 3})->distance, 0.5f);
+  EXPECT_EQ(layer.numBlocks(), 1u);
+  EXPECT_EQ(layer.voxelBytes(), 512u * sizeof(TsdfVoxel));
+}
+
+TEST(TsdfLayer, TrilinearInterpolationIsExactOnLinearFields) {
+  TsdfLayer layer = TsdfLayer::create(0.05f, 4).value();
+  const Eigen::Vector3f g(0.3f, -0.7f, 0.2f);
+  const float offset = 0.1f;
+  for (int bz = -1; bz <= 1; ++bz) {
+    for (int by = -1; by <= 1; ++by) {
+      for (int bx = -1; bx <= 1; ++bx) layer.allocateBlock({bx, by, bz});
+    }
+  }
+  for (const auto& [index, block] : layer.blocks()) {
+    for (int z = 0; z < 4; ++z) {
+      for (int y = 0; y < 4; ++y) {
+        for (int x = 0; x < 4; ++x) {
+          const VoxelIndex v = index * 4 + Eigen::Vector3i(x, y, z);
+          TsdfVoxel* voxel = layer.voxel(v);
+          voxel->distance = g.dot(layer.voxelCenter(v)) + offset;
+          voxel->weight = 1.0f;
+        }
+      }
+    }
+  }
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<float> coord(-0.17f, 0.17f);  // inside the centres' hull
+  for (int i = 0; i < 1000; ++i) {
+    const Eigen::Vector3f p(coord(rng), coord(rng), coord(rng));
+    float d = 0.0f;
+    ASSERT_TRUE(layer.interpolateDistance(p, &d)) << p.transpose();
+    ASSERT_NEAR(d, g.dot(p) + offset, 1e-5f);
+  }
+  float d = 0.0f;
+  EXPECT_FALSE(layer.interpolateDistance({1.0f, 1.0f, 1.0f}, &d));  // no blocks there
+  layer.voxel({0, 0, 0})->weight = 0.0f;  // an unobserved corner
+  EXPECT_FALSE(layer.interpolateDistance({0.03f, 0.03f, 0.03f}, &d));
+}
+
+}  // namespace
+}  // namespace objdb::tsdf
