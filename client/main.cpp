@@ -15,6 +15,7 @@ commands:
   health   ask a server whether it is serving (grpc.health.v1 Check)
   sim      render synthetic RGB-D datasets with ground truth (presets or scene files)
   info     describe dataset folders (objdb or TUM layout): frames, camera, objects
+  fuse     integrate a dataset into a TSDF volume and write its surface as a PLY mesh
   segment  segment one dataset frame and write its steps as PNGs (depth, normals, labels, ...)
   help     show this text
 
@@ -37,6 +38,7 @@ int main(int argc, char** argv) {
   if (command == "sim") return objdb::runSimCommand(argc - 1, argv + 1);
   if (command == "info") return objdb::runInfoCommand(argc - 1, argv + 1);
   if (command == "segment") return objdb::runSegmentCommand(argc - 1, argv + 1);
+  if (command == "fuse") return objdb::runFuseCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }
