@@ -55,9 +55,10 @@ Status TsdfParams::validate() const {
 Status GsmParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(min_label_voxels, 1, 1 << 30, "gsm.min_label_voxels"));
   OBJDB_RETURN_IF_ERROR(inRange(merge_overlap_ratio, 0.0, 1.0, "gsm.merge_overlap_ratio"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(association_overlap_ratio, 0.0, 1.0, "gsm.association_overlap_ratio"));
   OBJDB_RETURN_IF_ERROR(inRange(merge_min_frames, 1, 1 << 20, "gsm.merge_min_frames"));
-  OBJDB_RETURN_IF_ERROR(inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames"));
-  return inRange(max_labels_per_voxel, 1, 16, "gsm.max_labels_per_voxel");
+  return inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames");
 }
 
 Status KeypointParams::validate() const {

@@ -43,10 +43,10 @@ struct TsdfParams {
 // §III-B Global Segmentation Map (voxblox++ iodb_node defaults).
 struct GsmParams {
   int min_label_voxels = 20;             // labels with fewer voxels are not extracted
+  float association_overlap_ratio = 0.2f; // a segment takes a label covering this share of it
   float merge_overlap_ratio = 0.1f;      // pairwise label overlap that counts as evidence
   int merge_min_frames = 2;              // frames of evidence before two labels merge
   int extraction_age_frames = 10;        // a label untouched this long is extracted
-  int max_labels_per_voxel = 4;          // bound of the per-voxel label history
   Status validate() const;
 };
 

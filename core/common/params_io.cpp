@@ -38,10 +38,10 @@ void forEachField(TsdfParams& p, Fn&& fn) {
 template <typename Fn>
 void forEachField(GsmParams& p, Fn&& fn) {
   fn("min_label_voxels", p.min_label_voxels);
+  fn("association_overlap_ratio", p.association_overlap_ratio);
   fn("merge_overlap_ratio", p.merge_overlap_ratio);
   fn("merge_min_frames", p.merge_min_frames);
   fn("extraction_age_frames", p.extraction_age_frames);
-  fn("max_labels_per_voxel", p.max_labels_per_voxel);
 }
 template <typename Fn>
 void forEachField(KeypointParams& p, Fn&& fn) {

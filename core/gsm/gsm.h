@@ -1,0 +1,102 @@
+// Global Segmentation Map (paper §III-B): a TSDF layer plus a label layer of the same block
+// structure whose voxels keep a bounded history of label votes (label_voxel.h). Each frame's
+// segments are associated with global labels by counting, over the voxels their points fall
+// into, how often each existing main label appears; labels that keep co-occurring inside one
+// segment are merged (union–find: O(1), counts summed lazily, lossless); labels untouched for
+// a while are extracted as raw segments for the object database.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include <Eigen/Geometry>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/container/flat_hash_set.h"
+#include "core/common/params.h"
+#include "core/gsm/label_voxel.h"
+#include "core/segmentation/depth_segmenter.h"
+#include "core/tsdf/tsdf_integrator.h"
+
+namespace objdb::gsm {
+
+// A finished segment: its label, its voxels' TSDF in its own frame and where that frame is.
+struct RawSegment {
+  Label label = 0;
+  // Segment frame = world frame translated to the voxel-aligned lower corner of the grid, so
+  // grid voxel centres coincide with the map's: p_world = T_world_segment * p_segment.
+  Transform T_world_segment = Transform::Identity();
+  tsdf::TsdfLayer grid;                      // voxels carrying the label plus a truncation margin
+  std::vector<tsdf::VoxelIndex> label_voxels; // in the segment frame
+  int64_t last_update_frame = 0;
+  int64_t extraction_frame = 0;
+};
+
+struct GsmFrameResult {
+  tsdf::IntegrationStats tsdf;
+  std::vector<Label> segment_labels;  // global label of each frame segment (index = label − 1)
+  size_t new_labels = 0;
+  size_t merges = 0;
+  size_t voted_voxels = 0;
+};
+
+struct LabelInfo {
+  int64_t voxels = 0;             // voxels whose (raw) main label is this label or a merged one
+  int64_t last_update_frame = -1;
+  int64_t extracted_frame = -1;   // −1: not extracted since its last update
+  absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;  // where it has votes
+};
+
+class Gsm {
+ public:
+  static StatusOr<Gsm> create(const TsdfParams& tsdf_params, const GsmParams& gsm_params,
+                              const Intrinsics& intrinsics, int threads = 1);
+
+  // Fuses one segmented frame: `labels` are the frame's segment labels per pixel (0 = none), as
+  // DepthSegmenter produces. Errors leave the map unchanged.
+  StatusOr<GsmFrameResult> integrate(const DepthImage& depth, const segmentation::LabelImage& labels,
+                                     const Transform& T_world_camera,
+                                     const ColorImage* color = nullptr);
+
+  // Raw segments of the labels not updated for extraction_age_frames frames (all labels when
+  // `flush`), each extracted once until it is updated again; labels smaller than
+  // min_label_voxels are skipped.
+  std::vector<RawSegment> extractIdle(bool flush = false);
+
+  // The label a (possibly merged-away) label now belongs to.
+  Label resolve(Label label) const;
+  // Main label of a voxel after merges (0 = none or unallocated).
+  Label mainLabel(const tsdf::VoxelIndex& v) const;
+  const LabelVoxel* labelVoxel(const tsdf::VoxelIndex& v) const;
+
+  const tsdf::TsdfLayer& tsdf() const { return layer_; }
+  tsdf::TsdfLayer& tsdf() { return layer_; }
+  int64_t frames() const { return frame_; }
+  size_t numLabels() const { return info_.size(); }
+  const absl::flat_hash_map<Label, LabelInfo>& labels() const { return info_; }
+  size_t labelBytes() const;
+
+ private:
+  Gsm(const TsdfParams& tsdf_params, const GsmParams& gsm_params, tsdf::TsdfIntegrator integrator,
+      tsdf::TsdfLayer layer);
+  Label newLabel();
+  void merge(Label keep, Label gone);
+  Label mainOf(const LabelVoxel& voxel) const;
+  LabelVoxel& labelVoxelFor(const tsdf::VoxelIndex& v);
+
+  TsdfParams tsdf_params_;
+  GsmParams params_;
+  Intrinsics intrinsics_;
+  tsdf::TsdfIntegrator integrator_;
+  tsdf::TsdfLayer layer_;
+  absl::flat_hash_map<tsdf::BlockIndex, std::vector<LabelVoxel>, tsdf::BlockIndexHash> label_blocks_;
+  absl::flat_hash_map<Label, LabelInfo> info_;          // roots only
+  absl::flat_hash_map<Label, Label> parent_;            // union–find over all labels ever made
+  absl::flat_hash_map<uint64_t, int> merge_evidence_;   // (a, b) packed → frames seen together
+  Label next_label_ = 1;
+  int64_t frame_ = 0;
+};
+
+}  // namespace objdb::gsm

@@ -1,0 +1,209 @@
+#include "core/gsm/gsm.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include "core/sim/renderer.h"
+#include "core/sim/shapes.h"
+
+namespace objdb::gsm {
+namespace {
+
+// A box (instance 2) standing on a floor (instance 1), seen from a few poses around it.
+struct World {
+  TriangleMesh floor = sim::makePlane(6.0f, 6.0f, 0.5f);
+  TriangleMesh box = sim::makeBox({0.5f, 0.4f, 0.4f});
+  Transform T_world_box = Transform::Identity();
+  World() { T_world_box.translation() = Eigen::Vector3d(0, 0, 0.2); }
+  std::vector<sim::RenderInstance> instances() const {
+    return {sim::RenderInstance{&floor, Transform::Identity(), 1},
+            sim::RenderInstance{&box, T_world_box, 2}};
+  }
+  Transform camera(double angle_rad) const {
+    return lookAt(Eigen::Vector3d(1.6 * std::cos(angle_rad), 1.6 * std::sin(angle_rad), 1.2),
+                  Eigen::Vector3d(0, 0, 0.2))
+        .value();
+  }
+};
+
+segmentation::LabelImage labelsFrom(const InstanceImage& instances, bool split_box) {
+  segmentation::LabelImage labels(instances.width, instances.height, 0);
+  int u_min = instances.width, u_max = 0;
+  for (int v = 0; v < instances.height; ++v) {
+    for (int u = 0; u < instances.width; ++u) {
+      if (instances.at(u, v) == 2) {
+        u_min = std::min(u_min, u);
+        u_max = std::max(u_max, u);
+      }
+    }
+  }
+  const int middle = (u_min + u_max) / 2;
+  for (int v = 0; v < instances.height; ++v) {
+    for (int u = 0; u < instances.width; ++u) {
+      const uint16_t id = instances.at(u, v);
+      if (id == 1) labels.at(u, v) = 1;
+      if (id == 2) labels.at(u, v) = split_box && u > middle ? 3 : 2;
+    }
+  }
+  return labels;
+}
+
+Gsm makeGsm(const Intrinsics& k, GsmParams params = {}) {
+  TsdfParams tsdf;
+  tsdf.voxel_size_m = 0.02f;
+  return Gsm::create(tsdf, params, k).value();
+}
+
+TEST(Gsm, ConsistentLabelsAcrossFramesForTheSameObject) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  Gsm gsm = makeGsm(k);
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  Label box_label = 0, floor_label = 0;
+  for (int f = 0; f < 5; ++f) {
+    const Transform T = world.camera(0.2 * f);
+    renderer.render(world.instances(), T, &out);
+    auto labels = labelsFrom(out.instances, false);
+    if (f % 2 == 1) {  // per-frame labels need not agree: swap them every other frame
+      for (int32_t& l : labels.data) l = l == 1 ? 2 : l == 2 ? 1 : l;
+    }
+    auto r = gsm.integrate(out.depth, labels, T);
+    ASSERT_TRUE(r.ok()) << r.status();
+    const Label floor_now = r->segment_labels[f % 2 == 1 ? 1 : 0];
+    const Label box_now = r->segment_labels[f % 2 == 1 ? 0 : 1];
+    if (f == 0) {
+      floor_label = floor_now;
+      box_label = box_now;
+      EXPECT_EQ(r->new_labels, 2u);
+    } else {
+      EXPECT_EQ(floor_now, floor_label) << "frame " << f;
+      EXPECT_EQ(box_now, box_label) << "frame " << f;
+      EXPECT_EQ(r->new_labels, 0u);
+    }
+  }
+  EXPECT_NE(box_label, floor_label);
+  EXPECT_EQ(gsm.numLabels(), 2u);
+}
+
+TEST(Gsm, TwoSegmentsOfOneObjectGetMergedAfterAFewFrames) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  GsmParams params;  // merge after 2 frames of evidence at overlap ≥ 0.1
+  Gsm gsm = makeGsm(k, params);
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  // Frame 0: the box comes as two segments → two labels.
+  renderer.render(world.instances(), world.camera(0.0), &out);
+  auto r = gsm.integrate(out.depth, labelsFrom(out.instances, true), world.camera(0.0));
+  ASSERT_TRUE(r.ok());
+  const Label left = r->segment_labels[1], right = r->segment_labels[2];
+  ASSERT_NE(left, right);
+  // Then the whole box as one segment: both labels overlap it.
+  size_t merges = 0;
+  for (int f = 1; f <= 3; ++f) {
+    renderer.render(world.instances(), world.camera(0.05 * f), &out);
+    r = gsm.integrate(out.depth, labelsFrom(out.instances, false), world.camera(0.05 * f));
+    ASSERT_TRUE(r.ok());
+    merges += r->merges;
+    if (f == 1) {
+      EXPECT_NE(gsm.resolve(left), gsm.resolve(right)) << "one frame is not evidence enough";
+    }
+  }
+  EXPECT_EQ(merges, 1u);
+  EXPECT_EQ(gsm.resolve(left), gsm.resolve(right));
+  EXPECT_EQ(gsm.resolve(right), std::min(left, right));  // the older label survives
+  EXPECT_EQ(gsm.numLabels(), 2u);                         // floor + box
+  // Merging is lossless: voxels voted for either half now report the merged label.
+  size_t box_voxels = 0;
+  for (const auto& [label, info] : gsm.labels()) {
+    if (label == gsm.resolve(left)) box_voxels = size_t(info.voxels);
+  }
+  EXPECT_GT(box_voxels, 100u);
+}
+
+TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  GsmParams params;
+  params.extraction_age_frames = 3;
+  Gsm gsm = makeGsm(k, params);
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  Label box = 0;
+  for (int f = 0; f < 4; ++f) {
+    renderer.render(world.instances(), world.camera(0.3 * f), &out);
+    auto r = gsm.integrate(out.depth, labelsFrom(out.instances, false), world.camera(0.3 * f));
+    ASSERT_TRUE(r.ok());
+    box = r->segment_labels[1];
+  }
+  EXPECT_TRUE(gsm.extractIdle().empty());  // just updated
+  // Frames that see only the floor: the box label ages.
+  std::vector<RawSegment> extracted;
+  int frames_until_extraction = 0;
+  while (extracted.empty() && frames_until_extraction < 10) {
+    renderer.render({world.instances()[0]}, world.camera(3.0), &out);
+    auto labels = labelsFrom(out.instances, false);
+    ASSERT_TRUE(gsm.integrate(out.depth, labels, world.camera(3.0)).ok());
+    ++frames_until_extraction;
+    for (auto& s : gsm.extractIdle()) extracted.push_back(std::move(s));
+  }
+  // Last updated in frame 3; idle for extraction_age_frames = 3 frames after it.
+  EXPECT_EQ(frames_until_extraction, 3);
+  ASSERT_EQ(extracted.size(), 1u) << "the box once; the floor is still being updated";
+  const RawSegment& s = extracted[0];
+  EXPECT_EQ(s.label, box);
+  EXPECT_EQ(s.last_update_frame, 3);
+  EXPECT_GE(s.label_voxels.size(), size_t(params.min_label_voxels));
+  // Every label voxel lies on the box surface (within a voxel and a half), in world coordinates.
+  const Transform T_box_world = world.T_world_box.inverse();
+  for (const auto& v : s.label_voxels) {
+    const Eigen::Vector3d p_world =
+        s.T_world_segment * s.grid.voxelCenter(v).cast<double>();
+    const Eigen::Vector3d p = T_box_world * p_world;
+    const double outside = (p.cwiseAbs() - Eigen::Vector3d(0.25, 0.2, 0.2)).maxCoeff();
+    ASSERT_LT(std::abs(outside), 0.03) << p.transpose();
+  }
+  // The grid holds the TSDF around them, identical to the map's voxels.
+  size_t copied = 0;
+  for (const auto& [index, block] : s.grid.blocks()) {
+    for (size_t i = 0; i < block->voxels().size(); ++i) {
+      const tsdf::TsdfVoxel& voxel = block->voxels()[i];
+      if (!(voxel.weight > 0.0f)) continue;
+      const int vps = s.grid.voxelsPerSide();
+      const tsdf::VoxelIndex local = index * vps + Eigen::Vector3i(int(i % vps), int((i / vps) % vps), int(i / (vps * vps)));
+      const Eigen::Vector3d world_point = s.T_world_segment * s.grid.voxelCenter(local).cast<double>();
+      const tsdf::TsdfVoxel* map_voxel = gsm.tsdf().voxel(gsm.tsdf().voxelIndexOf(world_point.cast<float>()));
+      ASSERT_NE(map_voxel, nullptr);
+      ASSERT_EQ(map_voxel->distance, voxel.distance);
+      ++copied;
+    }
+  }
+  EXPECT_GT(copied, s.label_voxels.size());
+  // Nothing more comes out until the label is updated again; a flush still skips it.
+  EXPECT_TRUE(gsm.extractIdle().empty());
+  for (const auto& f : gsm.extractIdle(true)) EXPECT_NE(f.label, box);
+}
+
+TEST(Gsm, BadFramesAreRefusedAndLeaveTheMapUnchanged) {
+  const Intrinsics k = Intrinsics::tango();
+  Gsm gsm = makeGsm(k);
+  const DepthImage depth(k.width, k.height, 1.5f);
+  segmentation::LabelImage labels(k.width, k.height, 1);
+  auto r = gsm.integrate(depth, segmentation::LabelImage(10, 10, 1), Transform::Identity());
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("10x10"), absl::string_view::npos);
+  Transform bad = Transform::Identity();
+  bad.linear()(0, 0) = std::nan("");
+  EXPECT_EQ(gsm.integrate(depth, labels, bad).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(gsm.tsdf().numBlocks(), 0u);
+  EXPECT_EQ(gsm.numLabels(), 0u);
+  EXPECT_EQ(gsm.frames(), 0);
+  EXPECT_TRUE(gsm.integrate(depth, labels, Transform::Identity()).ok());
+  EXPECT_EQ(gsm.numLabels(), 1u);
+  EXPECT_GT(gsm.labelBytes(), 0u);
+}
+
+}  // namespace
+}  // namespace objdb::gsm
