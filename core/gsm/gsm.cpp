@@ -150,8 +150,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   int32_t n_segments = 0;
   for (int32_t l : labels.data) n_segments = std::max(n_segments, l);
   std::vector<uint32_t> segment_size(size_t(n_segments) + 1, 0);
-  std::map<std::pair<int32_t, Label>, uint32_t> overlap;  // (segment, main label) → points
-  absl::flat_hash_map<uint64_t, FrameVotes> votes;
+  absl::flat_hash_map<uint64_t, FrameVotes> votes;  // points bundled per voxel
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const size_t i = size_t(v) * size_t(w) + size_t(u);
@@ -165,14 +164,24 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
                                                     float((v - k.cy) * z / k.fy), z);
       const tsdf::VoxelIndex voxel = layer_.voxelIndexOf(p);
       ++segment_size[size_t(s)];
-      if (const Label g = mainLabel(voxel); g != 0) ++overlap[{s, g}];
       votes[packVoxel(voxel)].add(s);
+    }
+  }
+  // Segment × label overlaps, counted once per voxel from the bundled points.
+  absl::flat_hash_map<uint64_t, uint32_t> overlap;  // (segment << 32 | main label) → points
+  for (const auto& [key, frame_votes] : votes) {
+    const Label g = mainLabel(unpackVoxel(key));
+    if (g == 0) continue;
+    for (int k = 0; k < 2; ++k) {
+      if (frame_votes.segment[k] != 0) {
+        overlap[(uint64_t(uint32_t(frame_votes.segment[k])) << 32) | g] += frame_votes.count[k];
+      }
     }
   }
 
   // Greedy association, largest overlap first; at most one segment per label per frame.
   std::vector<std::tuple<uint32_t, int32_t, Label>> pairs;
-  for (const auto& [key, n] : overlap) pairs.emplace_back(n, key.first, key.second);
+  for (const auto& [key, n] : overlap) pairs.emplace_back(n, int32_t(key >> 32), Label(key & 0xffffffffULL));
   std::sort(pairs.begin(), pairs.end(), [](const auto& a, const auto& b) {
     return std::get<0>(a) != std::get<0>(b) ? std::get<0>(a) > std::get<0>(b)
                                             : std::tie(std::get<1>(a), std::get<2>(a)) <

@@ -1,0 +1,177 @@
+// Segmentation + GSM on the synthetic lounge with ground-truth poses (paper §III-A/B): time per
+// frame (segmentation, GSM integration), labels, bytes per voxel, and label quality against the
+// ground truth: for every object its best GSM label's share of the object's voxels, and the
+// labels that span two objects.
+//   gsm_eval [--camera vga|tango] [--voxel-size M] [--frames-per-session N] [--sessions N]
+#include <malloc.h>
+
+#include <chrono>
+#include <future>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "core/gsm/gsm.h"
+#include "core/segmentation/depth_segmenter.h"
+#include "core/sim/generator.h"
+#include "core/sim/lounge.h"
+
+namespace {
+double msSince(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t).count();
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  using namespace objdb;
+  mallopt(M_MMAP_THRESHOLD, 256 << 20);
+  mallopt(M_TRIM_THRESHOLD, 512 << 20);
+  cv::setNumThreads(1);
+  std::string camera = "vga";
+  float voxel = 0.02f;
+  int per_session = 100, sessions = 1;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--camera" && i + 1 < argc) {
+      camera = argv[++i];
+    } else if (a == "--voxel-size" && i + 1 < argc) {
+      voxel = float(std::atof(argv[++i]));
+    } else if (a == "--frames-per-session" && i + 1 < argc) {
+      per_session = std::max(1, std::atoi(argv[++i]));
+    } else if (a == "--sessions" && i + 1 < argc) {
+      sessions = std::clamp(std::atoi(argv[++i]), 1, 3);
+    } else {
+      std::fprintf(stderr, "usage: gsm_eval [--camera vga|tango] [--voxel-size M] "
+                           "[--frames-per-session N] [--sessions N]\n");
+      return 2;
+    }
+  }
+  sim::LoungeOptions options;
+  options.camera = camera;
+  const std::vector<sim::Scene> scenes = sim::loungePreset(options).value();
+  std::printf("Segmentation + GSM, lounge, %s, %.0f mm voxels, %d frames per session\n\n",
+              camera.c_str(), voxel * 1000, per_session);
+  std::printf("%-10s %8s %8s %8s %8s %7s %8s %10s %12s\n", "session", "seg ms", "gsm ms", "sum ms",
+              "Hz", "labels", "merges", "best cov.", "span 2 obj.");
+  for (int si = 0; si < sessions; ++si) {
+    const sim::Scene& scene = scenes[size_t(si)];
+    const auto built = sim::buildScene(scene).value();
+    const auto poses = sim::sampleTrajectory(scene.trajectory).value();
+    const sim::Renderer renderer(scene.intrinsics);
+    auto segmenter = segmentation::DepthSegmenter::create(SegmentationParams(), scene.intrinsics).value();
+    TsdfParams tsdf;
+    tsdf.voxel_size_m = voxel;
+    tsdf.truncation_voxels = 0.06f / voxel;  // 6 cm at every voxel size (3 voxels at 2 cm)
+    gsm::Gsm map = gsm::Gsm::create(tsdf, GsmParams(), scene.intrinsics).value();
+    std::set<uint16_t> structure;
+    for (const auto& o : scene.objects) {
+      if (o.structure) structure.insert(uint16_t(o.id));
+    }
+    // Ground truth per voxel: the instance ids voted the same way the GSM votes its labels.
+    std::map<uint64_t, gsm::LabelVoxel> truth;
+    double seg_ms = 0, gsm_ms = 0;
+    size_t merges = 0, frames = 0;
+    const size_t step = std::max<size_t>(1, poses.size() / size_t(per_session));
+    for (size_t i = 0; i < poses.size(); i += step) {
+      const Frame f = sim::renderFrame(scene, built, renderer, poses[i], i, false);
+      auto t = std::chrono::steady_clock::now();
+      const auto seg = segmenter.segment(f.depth).value();
+      seg_ms += msSince(t);
+      t = std::chrono::steady_clock::now();
+      const auto r = map.integrate(f.depth, seg.labels, f.T_world_camera).value();
+      gsm_ms += msSince(t);
+      merges += r.merges;
+      ++frames;
+      const Eigen::Isometry3f T = f.T_world_camera.cast<float>();
+      const Intrinsics& k = scene.intrinsics;
+      for (int v = 0; v < k.height; ++v) {
+        for (int u = 0; u < k.width; ++u) {
+          const float z = f.depth.at(u, v);
+          const uint16_t id = f.instances->at(u, v);
+          if (!isValidDepth(z) || id == 0 || z > tsdf.max_ray_length_m) continue;
+          const Eigen::Vector3f p = T * Eigen::Vector3f(float((u - k.cx) * z / k.fx), float((v - k.cy) * z / k.fy), z);
+          const tsdf::VoxelIndex x = map.tsdf().voxelIndexOf(p);
+          const uint64_t key = (uint64_t(uint32_t(x.x() + (1 << 20))) & 0x1fffff) |
+                               ((uint64_t(uint32_t(x.y() + (1 << 20))) & 0x1fffff) << 21) |
+                               ((uint64_t(uint32_t(x.z() + (1 << 20))) & 0x1fffff) << 42);
+          truth[key].vote(id);
+        }
+      }
+    }
+    // Throughput on two cores: segmentation of frame k+1 overlaps GSM fusion of frame k
+    // (DESIGN.md, Threads). Frames are rendered beforehand so only the pipeline is timed.
+    std::vector<Frame> input;
+    for (size_t i = 0; i < poses.size(); i += step) {
+      input.push_back(sim::renderFrame(scene, built, renderer, poses[i], i, false));
+    }
+    gsm::Gsm pipelined = gsm::Gsm::create(tsdf, GsmParams(), scene.intrinsics).value();
+    auto pipe_segmenter =
+        segmentation::DepthSegmenter::create(SegmentationParams(), scene.intrinsics).value();
+    const auto pipe_start = std::chrono::steady_clock::now();
+    std::future<segmentation::SegmentationResult> next = std::async(std::launch::async, [&] {
+      return pipe_segmenter.segment(input[0].depth).value();
+    });
+    for (size_t i = 0; i < input.size(); ++i) {
+      segmentation::SegmentationResult current = next.get();
+      if (i + 1 < input.size()) {
+        next = std::async(std::launch::async,
+                          [&, i] { return pipe_segmenter.segment(input[i + 1].depth).value(); });
+      }
+      (void)pipelined.integrate(input[i].depth, current.labels, input[i].T_world_camera).value();
+    }
+    const double pipeline_hz = 1000.0 * double(input.size()) / msSince(pipe_start);
+
+    // Per object: voxels, and how many of them each GSM label holds.
+    std::map<uint16_t, size_t> object_voxels;
+    std::map<uint16_t, std::map<gsm::Label, size_t>> by_label;
+    std::map<gsm::Label, std::map<uint16_t, size_t>> label_objects;
+    for (const auto& [key, voxel_truth] : truth) {
+      const uint16_t id = uint16_t(voxel_truth.mainLabel());
+      auto g = [](uint64_t bits) { return int(bits & 0x1fffff) - (1 << 20); };
+      const tsdf::VoxelIndex x(g(key), g(key >> 21), g(key >> 42));
+      const gsm::Label l = map.mainLabel(x);
+      ++object_voxels[id];
+      if (l != 0) {
+        ++by_label[id][l];
+        ++label_objects[l][id];
+      }
+    }
+    double worst = 1.0, sum = 0.0;
+    int objects = 0;
+    for (const auto& [id, n] : object_voxels) {
+      if (structure.count(id)) continue;
+      size_t best = 0;
+      for (const auto& [l, c] : by_label[id]) best = std::max(best, c);
+      const double share = double(best) / double(n);
+      worst = std::min(worst, share);
+      sum += share;
+      ++objects;
+    }
+    size_t spanning = 0, labels = 0;
+    for (const auto& [l, objects_in] : label_objects) {
+      size_t total = 0, above = 0;
+      for (const auto& [id, c] : objects_in) total += c;
+      for (const auto& [id, c] : objects_in) above += c > total / 10 ? 1 : 0;
+      ++labels;
+      spanning += above >= 2 ? 1 : 0;
+    }
+    std::printf("%-10s %8.2f %8.2f %8.2f %8.1f %7zu %8zu %5.2f/%4.2f %6zu/%zu\n",
+                scene.name.c_str(), seg_ms / double(frames), gsm_ms / double(frames),
+                (seg_ms + gsm_ms) / double(frames), 1000.0 * double(frames) / (seg_ms + gsm_ms),
+                map.numLabels(), merges, objects ? sum / objects : 0.0, worst, spanning, labels);
+    std::printf("%-10s pipelined on 2 threads (segment k+1 while fusing k): %.1f Hz\n", "",
+                pipeline_hz);
+    std::printf("%-10s %zu TSDF blocks (%.1f MB), labels %.1f MB: %zu bytes per voxel incl. labels\n", "",
+                map.tsdf().numBlocks(), double(map.tsdf().voxelBytes()) / 1e6,
+                double(map.labelBytes()) / 1e6, sizeof(tsdf::TsdfVoxel) + sizeof(gsm::LabelVoxel));
+  }
+  std::printf("\nbest cov.: mean / worst over objects (floor, walls excluded) of the best GSM "
+              "label's share of the object's voxels; span 2 obj.: labels with >= 2 objects above "
+              "10 %% of their voxels / labels. One thread.\n");
+  return 0;
+}
