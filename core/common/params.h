@@ -44,6 +44,7 @@ struct TsdfParams {
 struct GsmParams {
   int min_label_voxels = 20;             // labels with fewer voxels are not extracted
   float association_overlap_ratio = 0.2f; // a segment takes a label covering this share of it
+  bool label_history = true;             // false: one label + confidence per voxel (ablation)
   float merge_overlap_ratio = 0.1f;      // pairwise label overlap that counts as evidence
   int merge_min_frames = 2;              // frames of evidence before two labels merge
   int extraction_age_frames = 10;        // a label untouched this long is extracted

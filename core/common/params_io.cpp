@@ -39,6 +39,7 @@ template <typename Fn>
 void forEachField(GsmParams& p, Fn&& fn) {
   fn("min_label_voxels", p.min_label_voxels);
   fn("association_overlap_ratio", p.association_overlap_ratio);
+  fn("label_history", p.label_history);
   fn("merge_overlap_ratio", p.merge_overlap_ratio);
   fn("merge_min_frames", p.merge_min_frames);
   fn("extraction_age_frames", p.extraction_age_frames);
@@ -83,7 +84,13 @@ void forEachSection(Params& p, Fn&& fn) {
 
 template <typename T>
 Status readNumber(const json& value, const std::string& key, T* out) {
-  if constexpr (std::is_integral_v<T>) {
+  if constexpr (std::is_same_v<T, bool>) {
+    if (!value.is_boolean()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("config key '", key, "' must be true or false (got ", value.dump(), ")"));
+    }
+    *out = value.get<bool>();
+  } else if constexpr (std::is_integral_v<T>) {
     if (!value.is_number_integer()) {
       return absl::InvalidArgumentError(
           absl::StrCat("config key '", key, "' must be an integer (got ", value.dump(), ")"));

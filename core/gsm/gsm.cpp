@@ -226,7 +226,11 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
     const tsdf::VoxelIndex v = unpackVoxel(key);
     LabelVoxel& voxel = labelVoxelFor(v);
     const Label before = voxel.mainLabel();
-    voxel.vote(label);
+    if (params_.label_history) {
+      voxel.vote(label);
+    } else {
+      voxel.voteSingle(label);
+    }
     const Label after = voxel.mainLabel();
     if (before != after) {
       if (before != 0) --info_[resolve(before)].voxels;

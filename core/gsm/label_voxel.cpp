@@ -23,6 +23,16 @@ void LabelVoxel::vote(Label label) {
   ++counts[size_t(slot)];
 }
 
+void LabelVoxel::voteSingle(Label label) {
+  if (labels[0] == label || labels[0] == 0) {
+    labels[0] = label;
+    if (counts[0] < 255) ++counts[0];
+  } else if (--counts[0] == 0) {
+    labels[0] = label;
+    counts[0] = 1;
+  }
+}
+
 Label LabelVoxel::mainLabel() const {
   int best = -1;
   for (int i = 0; i < kLabelSlots; ++i) {

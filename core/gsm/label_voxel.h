@@ -24,6 +24,9 @@ struct LabelVoxel {
 
   // Adds one vote for `label` (≠ 0) following the rules above.
   void vote(Label label);
+  // The ablation of the paper's comparison (Tateno et al.): one label and a confidence in slot 0.
+  // The same label raises the confidence; another lowers it and takes over when it reaches 0.
+  void voteSingle(Label label);
   // The most voted label (first slot on ties); 0 when empty.
   Label mainLabel() const;
   uint32_t countOf(Label label) const;

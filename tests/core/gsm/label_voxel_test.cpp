@@ -49,3 +49,27 @@ TEST(LabelVoxel, AFullVoxelEvictsTheWeakestLabelWhichInheritsItsCount) {
 
 }  // namespace
 }  // namespace objdb::gsm
+
+namespace objdb::gsm {
+namespace {
+
+TEST(LabelVoxel, SingleLabelAblationLosesAPluralityThatTheHistoryKeeps) {
+  // Votes 1 ×4, then 2 ×3, then 3 ×3: label 1 has the most votes (40 %). One label + confidence
+  // spends its confidence on the interleaved others and ends on label 3.
+  LabelVoxel history, single;
+  auto both = [&](Label l, int n) {
+    for (int i = 0; i < n; ++i) {
+      history.vote(l);
+      single.voteSingle(l);
+    }
+  };
+  both(1, 4);
+  both(2, 3);
+  both(3, 3);
+  EXPECT_EQ(history.mainLabel(), 1u);
+  EXPECT_EQ(single.mainLabel(), 3u);
+  EXPECT_EQ(single.countOf(1), 0u);
+}
+
+}  // namespace
+}  // namespace objdb::gsm
