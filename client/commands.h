@@ -7,6 +7,7 @@ namespace objdb {
 
 int runHealthCommand(int argc, char** argv);  // health_command.cpp
 int runFuseCommand(int argc, char** argv);    // fuse_command.cpp
+int runGsmCommand(int argc, char** argv);     // gsm_command.cpp
 int runSimCommand(int argc, char** argv);     // sim_command.cpp
 int runInfoCommand(int argc, char** argv);    // info_command.cpp
 int runSegmentCommand(int argc, char** argv); // segment_command.cpp

@@ -16,6 +16,7 @@ commands:
   sim      render synthetic RGB-D datasets with ground truth (presets or scene files)
   info     describe dataset folders (objdb or TUM layout): frames, camera, objects
   fuse     integrate a dataset into a TSDF volume and write its surface as a PLY mesh
+  gsm      segment + fuse a dataset into a Global Segmentation Map; label-coloured mesh, segments
   segment  segment one dataset frame and write its steps as PNGs (depth, normals, labels, ...)
   help     show this text
 
@@ -39,6 +40,7 @@ int main(int argc, char** argv) {
   if (command == "info") return objdb::runInfoCommand(argc - 1, argv + 1);
   if (command == "segment") return objdb::runSegmentCommand(argc - 1, argv + 1);
   if (command == "fuse") return objdb::runFuseCommand(argc - 1, argv + 1);
+  if (command == "gsm") return objdb::runGsmCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }
