@@ -128,6 +128,7 @@ void Gsm::merge(Label keep, Label gone) {
   k.last_update_frame = std::max(k.last_update_frame, g.last_update_frame);
   k.extracted_frame = -1;
   k.blocks.insert(g.blocks.begin(), g.blocks.end());
+  k.bounds.extend(g.bounds);
   info_.erase(gone);
   parent_[gone] = keep;
 }
@@ -240,6 +241,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
     info.last_update_frame = frame_;
     info.extracted_frame = -1;
     info.blocks.insert(layer_.blockOfVoxel(v));
+    info.bounds.extend(v);
     ++result.voted_voxels;
   }
   ++frame_;

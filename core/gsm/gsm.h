@@ -46,6 +46,7 @@ struct LabelInfo {
   int64_t voxels = 0;             // voxels whose (raw) main label is this label or a merged one
   int64_t last_update_frame = -1;
   int64_t extracted_frame = -1;   // −1: not extracted since its last update
+  Eigen::AlignedBox3i bounds;     // voxel indices that ever got a vote for it (empty at first)
   absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;  // where it has votes
 };
 

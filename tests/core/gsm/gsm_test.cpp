@@ -121,6 +121,11 @@ TEST(Gsm, TwoSegmentsOfOneObjectGetMergedAfterAFewFrames) {
     if (label == gsm.resolve(left)) box_voxels = size_t(info.voxels);
   }
   EXPECT_GT(box_voxels, 100u);
+  // Its bounds cover the box (0.5 × 0.4 × 0.4 m at 2 cm voxels: about 25 × 20 × 20 voxels).
+  const Eigen::AlignedBox3i& bounds = gsm.labels().at(gsm.resolve(left)).bounds;
+  ASSERT_FALSE(bounds.isEmpty());
+  EXPECT_NEAR(bounds.sizes().z(), 20, 3);
+  EXPECT_GE(bounds.sizes().x(), 18);
 }
 
 TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {
