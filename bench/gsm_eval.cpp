@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -35,6 +36,7 @@ int main(int argc, char** argv) {
   std::string camera = "vga";
   float voxel = 0.02f;
   int per_session = 100, sessions = 1;
+  double label_noise = 0.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--camera" && i + 1 < argc) {
@@ -43,19 +45,40 @@ int main(int argc, char** argv) {
       voxel = float(std::atof(argv[++i]));
     } else if (a == "--frames-per-session" && i + 1 < argc) {
       per_session = std::max(1, std::atoi(argv[++i]));
+    } else if (a == "--label-noise" && i + 1 < argc) {
+      label_noise = std::clamp(std::atof(argv[++i]), 0.0, 1.0);
     } else if (a == "--sessions" && i + 1 < argc) {
       sessions = std::clamp(std::atoi(argv[++i]), 1, 3);
     } else {
       std::fprintf(stderr, "usage: gsm_eval [--camera vga|tango] [--voxel-size M] "
-                           "[--frames-per-session N] [--sessions N]\n");
+                           "[--frames-per-session N] [--sessions N] [--label-noise P]\n");
       return 2;
     }
   }
+  // Inconsistent per-frame segmentation, for the ablation: with probability P a segment's pixels
+  // take the label of another segment of the frame (a false join). Seeded by the frame index, so
+  // both modes see the same perturbed frames.
+  auto perturb = [label_noise](segmentation::LabelImage* labels, size_t frame) {
+    if (label_noise <= 0.0) return;
+    int32_t n = 0;
+    for (int32_t l : labels->data) n = std::max(n, l);
+    if (n < 2) return;
+    std::mt19937 rng(uint32_t(frame) * 7919u + 17u);
+    std::uniform_real_distribution<double> coin(0.0, 1.0);
+    std::uniform_int_distribution<int32_t> pick(1, n);
+    std::vector<int32_t> to(size_t(n) + 1);
+    for (int32_t s = 0; s <= n; ++s) to[size_t(s)] = s;
+    for (int32_t s = 1; s <= n; ++s) {
+      if (coin(rng) < label_noise) to[size_t(s)] = pick(rng);
+    }
+    for (int32_t& l : labels->data) l = to[size_t(l)];
+  };
   sim::LoungeOptions options;
   options.camera = camera;
   const std::vector<sim::Scene> scenes = sim::loungePreset(options).value();
-  std::printf("Segmentation + GSM, lounge, %s, %.0f mm voxels, %d frames per session\n\n",
-              camera.c_str(), voxel * 1000, per_session);
+  std::printf("Segmentation + GSM, lounge, %s, %.0f mm voxels, %d frames per session, "
+              "label noise %.2f\n\n",
+              camera.c_str(), voxel * 1000, per_session, label_noise);
   std::printf("%-10s %-7s %8s %8s %8s %8s %7s %8s %10s %12s\n", "session", "mode", "seg ms", "gsm ms", "sum ms",
               "Hz", "labels", "merges", "best cov.", "span 2 obj.");
   for (int run = 0; run < 2 * sessions; ++run) {
@@ -84,8 +107,9 @@ int main(int argc, char** argv) {
     for (size_t i = 0; i < poses.size(); i += step) {
       const Frame f = sim::renderFrame(scene, built, renderer, poses[i], i, false);
       auto t = std::chrono::steady_clock::now();
-      const auto seg = segmenter.segment(f.depth).value();
+      auto seg = segmenter.segment(f.depth).value();
       seg_ms += msSince(t);
+      perturb(&seg.labels, i);
       t = std::chrono::steady_clock::now();
       const auto r = map.integrate(f.depth, seg.labels, f.T_world_camera).value();
       gsm_ms += msSince(t);
