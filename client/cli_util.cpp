@@ -1,5 +1,7 @@
 #include "client/cli_util.h"
 
+#include "core/common/params_io.h"
+
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -23,6 +25,30 @@ int usageError(const char* command, const std::string& message, const char* usag
 int reportError(const char* command, const Status& status) {
   std::fprintf(stderr, "objdb %s: %s\n", command, std::string(status.message()).c_str());
   return 1;
+}
+
+bool parseDatasetJobOption(const std::string& name, const char* value, DatasetJobOptions* options,
+                           std::string* error) {
+  error->clear();
+  if (name == "--dataset") {
+    options->dataset = value;
+  } else if (name == "--out") {
+    options->out = value;
+  } else if (name == "--config") {
+    options->config = value;
+  } else if (name == "--every") {
+    if (!parseInt(value, 1, 1000000, &options->every)) *error = "--every needs an integer >= 1";
+  } else if (name == "--threads") {
+    if (!parseInt(value, 1, 64, &options->threads)) *error = "--threads needs an integer 1..64";
+  } else {
+    return false;
+  }
+  return true;
+}
+
+StatusOr<Params> loadParams(const std::string& path) {
+  if (path.empty()) return Params();
+  return loadParamsFile(path);
 }
 
 }  // namespace objdb::cli

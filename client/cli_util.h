@@ -4,6 +4,7 @@
 
 #include <string>
 
+#include "core/common/params.h"
 #include "core/common/status.h"
 
 namespace objdb::cli {
@@ -16,5 +17,22 @@ int usageError(const char* command, const std::string& message, const char* usag
 
 // Prints "objdb <command>: <status message>" to stderr; returns 1.
 int reportError(const char* command, const Status& status);
+
+// Options of the commands that run over a whole dataset (fuse, gsm).
+struct DatasetJobOptions {
+  std::string dataset;  // --dataset DIR
+  std::string out;      // --out FILE
+  std::string config;   // --config FILE (JSON parameters)
+  long long every = 1;  // --every N: use every N-th frame
+  long long threads = 2;  // --threads N
+};
+
+// Takes `name value` if it is one of the options above: true when taken, with `*error` set when
+// the value is bad; false when the option is not one of them.
+bool parseDatasetJobOption(const std::string& name, const char* value, DatasetJobOptions* options,
+                           std::string* error);
+
+// The parameters of a `--config` file, or the defaults when `path` is empty.
+StatusOr<Params> loadParams(const std::string& path);
 
 }  // namespace objdb::cli

@@ -7,7 +7,6 @@
 #include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/progress.h"
-#include "core/common/params_io.h"
 #include "core/io/dataset.h"
 #include "core/io/mesh_io.h"
 #include "core/tsdf/mesh_extraction.h"
@@ -35,8 +34,7 @@ int reportError(const Status& status) { return cli::reportError("fuse", status);
 }  // namespace
 
 int runFuseCommand(int argc, char** argv) {
-  std::string dataset, out, config;
-  long long every = 1, threads = 2;
+  cli::DatasetJobOptions job;
   double voxel = 0.0;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -46,48 +44,37 @@ int runFuseCommand(int argc, char** argv) {
     }
     if (i + 1 >= argc) return usageError(a.rfind("--", 0) == 0 ? a + " needs a value" : "unexpected argument '" + a + "'");
     const char* value = argv[++i];
-    if (a == "--dataset") {
-      dataset = value;
-    } else if (a == "--out") {
-      out = value;
-    } else if (a == "--config") {
-      config = value;
+    std::string error;
+    if (cli::parseDatasetJobOption(a, value, &job, &error)) {
+      if (!error.empty()) return usageError(error);
     } else if (a == "--voxel-size") {
       char* end = nullptr;
       voxel = std::strtod(value, &end);
       if (end == value || *end != '\0' || !(voxel > 0.0)) return usageError("--voxel-size needs a positive number of metres");
-    } else if (a == "--every") {
-      if (!cli::parseInt(value, 1, 1000000, &every)) return usageError("--every needs an integer >= 1");
-    } else if (a == "--threads") {
-      if (!cli::parseInt(value, 1, 64, &threads)) return usageError("--threads needs an integer 1..64");
     } else {
       return usageError("unknown option '" + a + "'");
     }
   }
-  if (dataset.empty() || out.empty()) return usageError("--dataset and --out are required");
-
-  Params params;
-  if (!config.empty()) {
-    auto loaded = loadParamsFile(config);
-    if (!loaded.ok()) return reportError(loaded.status());
-    params = *loaded;
-  }
+  if (job.dataset.empty() || job.out.empty()) return usageError("--dataset and --out are required");
+  auto loaded = cli::loadParams(job.config);
+  if (!loaded.ok()) return reportError(loaded.status());
+  Params params = *loaded;
   if (voxel > 0.0) {
     params.tsdf.voxel_size_m = float(voxel);
     if (Status s = params.tsdf.validate(); !s.ok()) return reportError(s);
   }
-  auto opened = io::openDataset(dataset);
+  auto opened = io::openDataset(job.dataset);
   if (!opened.ok()) return reportError(opened.status());
   const io::Dataset& ds = **opened;
-  auto integrator = tsdf::TsdfIntegrator::create(params.tsdf, ds.intrinsics(), int(threads));
+  auto integrator = tsdf::TsdfIntegrator::create(params.tsdf, ds.intrinsics(), int(job.threads));
   if (!integrator.ok()) return reportError(integrator.status());
   auto layer = tsdf::TsdfLayer::create(params.tsdf.voxel_size_m, params.tsdf.voxels_per_side);
   if (!layer.ok()) return reportError(layer.status());
 
   tsdf::IntegrationStats total;
   size_t used = 0, rejected = 0;
-  cli::ProgressBar bar("fusing", (ds.size() + size_t(every) - 1) / size_t(every));
-  for (size_t i = 0; i < ds.size(); i += size_t(every)) {
+  cli::ProgressBar bar("fusing", (ds.size() + size_t(job.every) - 1) / size_t(job.every));
+  for (size_t i = 0; i < ds.size(); i += size_t(job.every)) {
     auto frame = ds.loadFrame(i);
     if (!frame.ok()) return reportError(frame.status());
     auto stats = integrator->integrate(frame->depth, frame->T_world_camera, &*layer,
@@ -109,13 +96,13 @@ int runFuseCommand(int argc, char** argv) {
   tsdf::MeshLayer meshes(params.tsdf.mesh_min_weight);
   meshes.update(&*layer, true);
   const TriangleMesh mesh = meshes.mesh();
-  if (Status s = io::writePlyMesh(out, mesh); !s.ok()) return reportError(s);
+  if (Status s = io::writePlyMesh(job.out, mesh); !s.ok()) return reportError(s);
   std::printf("%zu frames fused (%zu skipped), %.2f ms/frame integration; %zu blocks, %.1f MB of "
               "voxels; %zu invalid and %zu out-of-range depth pixels skipped\n",
               used, rejected, used ? total.milliseconds / double(used) : 0.0, layer->numBlocks(),
               double(layer->voxelBytes()) / 1e6, total.invalid_depth, total.out_of_range);
   std::printf("mesh: %zu vertices, %zu triangles, %.2f m² -> %s\n", mesh.vertices.size(),
-              mesh.triangles.size(), mesh.surfaceArea(), out.c_str());
+              mesh.triangles.size(), mesh.surfaceArea(), job.out.c_str());
   return rejected == 0 ? 0 : 1;
 }
 

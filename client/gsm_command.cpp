@@ -9,7 +9,6 @@
 #include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/progress.h"
-#include "core/common/params_io.h"
 #include "core/gsm/gsm.h"
 #include "core/io/dataset.h"
 #include "core/io/mesh_io.h"
@@ -46,8 +45,8 @@ Rgb8 labelColor(gsm::Label label) {
 }  // namespace
 
 int runGsmCommand(int argc, char** argv) {
-  std::string dataset, out, config, segments_out;
-  long long every = 1, threads = 2;
+  cli::DatasetJobOptions job;
+  std::string segments_out;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") {
@@ -56,35 +55,25 @@ int runGsmCommand(int argc, char** argv) {
     }
     if (i + 1 >= argc) return usageError(a.rfind("--", 0) == 0 ? a + " needs a value" : "unexpected argument '" + a + "'");
     const char* value = argv[++i];
-    if (a == "--dataset") {
-      dataset = value;
-    } else if (a == "--out") {
-      out = value;
+    std::string error;
+    if (cli::parseDatasetJobOption(a, value, &job, &error)) {
+      if (!error.empty()) return usageError(error);
     } else if (a == "--segments-out") {
       segments_out = value;
-    } else if (a == "--config") {
-      config = value;
-    } else if (a == "--every") {
-      if (!cli::parseInt(value, 1, 1000000, &every)) return usageError("--every needs an integer >= 1");
-    } else if (a == "--threads") {
-      if (!cli::parseInt(value, 1, 64, &threads)) return usageError("--threads needs an integer 1..64");
     } else {
       return usageError("unknown option '" + a + "'");
     }
   }
-  if (dataset.empty() || out.empty()) return usageError("--dataset and --out are required");
-  Params params;
-  if (!config.empty()) {
-    auto loaded = loadParamsFile(config);
-    if (!loaded.ok()) return reportError(loaded.status());
-    params = *loaded;
-  }
-  auto opened = io::openDataset(dataset);
+  if (job.dataset.empty() || job.out.empty()) return usageError("--dataset and --out are required");
+  auto loaded = cli::loadParams(job.config);
+  if (!loaded.ok()) return reportError(loaded.status());
+  const Params params = *loaded;
+  auto opened = io::openDataset(job.dataset);
   if (!opened.ok()) return reportError(opened.status());
   const io::Dataset& ds = **opened;
   auto segmenter = segmentation::DepthSegmenter::create(params.segmentation, ds.intrinsics());
   if (!segmenter.ok()) return reportError(segmenter.status());
-  auto map = gsm::Gsm::create(params.tsdf, params.gsm, ds.intrinsics(), int(threads));
+  auto map = gsm::Gsm::create(params.tsdf, params.gsm, ds.intrinsics(), int(job.threads));
   if (!map.ok()) return reportError(map.status());
   if (!segments_out.empty()) {
     std::error_code ec;
@@ -108,8 +97,8 @@ int runGsmCommand(int argc, char** argv) {
     }
     return absl::OkStatus();
   };
-  cli::ProgressBar bar("segmenting + fusing", (ds.size() + size_t(every) - 1) / size_t(every));
-  for (size_t i = 0; i < ds.size(); i += size_t(every)) {
+  cli::ProgressBar bar("segmenting + fusing", (ds.size() + size_t(job.every) - 1) / size_t(job.every));
+  for (size_t i = 0; i < ds.size(); i += size_t(job.every)) {
     auto frame = ds.loadFrame(i);
     if (!frame.ok()) return reportError(frame.status());
     auto seg = segmenter->segment(frame->depth, frame->color ? &*frame->color : nullptr);
@@ -138,14 +127,14 @@ int runGsmCommand(int argc, char** argv) {
   for (size_t v = 0; v < mesh.vertices.size(); ++v) {
     mesh.colors[v] = labelColor(map->mainLabel(map->tsdf().voxelIndexOf(mesh.vertices[v])));
   }
-  if (Status s = io::writePlyMesh(out, mesh); !s.ok()) return reportError(s);
+  if (Status s = io::writePlyMesh(job.out, mesh); !s.ok()) return reportError(s);
   std::printf("%zu frames (%zu skipped); segmentation %.1f ms/frame, TSDF %.1f ms/frame\n", used,
               rejected, used ? seg_ms / double(used) : 0.0, used ? gsm_ms / double(used) : 0.0);
   std::printf("%zu labels, %zu merges, %zu raw segments extracted; %.1f MB TSDF + %.1f MB labels\n",
               map->numLabels(), merges, extracted, double(map->tsdf().voxelBytes()) / 1e6,
               double(map->labelBytes()) / 1e6);
   std::printf("mesh coloured by label: %zu vertices, %zu triangles -> %s\n", mesh.vertices.size(),
-              mesh.triangles.size(), out.c_str());
+              mesh.triangles.size(), job.out.c_str());
   return rejected == 0 ? 0 : 1;
 }
 

@@ -20,7 +20,6 @@
 
 #include "client/cli_util.h"
 #include "client/commands.h"
-#include "core/common/params_io.h"
 #include "core/io/dataset.h"
 #include "core/segmentation/depth_segmenter.h"
 
@@ -188,14 +187,9 @@ int runSegmentCommand(int argc, char** argv) {
   if (args.frame < 0) return usageError("--frame N is required");
   if (args.out.empty()) return usageError("--out DIR is required");
 
-  Params params;
-  if (!args.config.empty()) {
-    StatusOr<Params> loaded = loadParamsFile(args.config);
-    if (!loaded.ok()) {
-      return reportError(annotate(loaded.status(), "bad config"));
-    }
-    params = *std::move(loaded);
-  }
+  StatusOr<Params> loaded = cli::loadParams(args.config);
+  if (!loaded.ok()) return reportError(annotate(loaded.status(), "bad config"));
+  const Params params = *std::move(loaded);
 
   const auto start = std::chrono::steady_clock::now();
   StatusOr<std::unique_ptr<io::Dataset>> opened = io::openDataset(args.dataset);
