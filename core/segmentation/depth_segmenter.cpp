@@ -123,94 +123,261 @@ void discontinuityMap(const DepthImage& depth, int window, float threshold, Mask
 
 namespace {
 
-// Box-filtered points over valid pixels: smoothed(u, v) = mean of the valid points in the
-// window (zero where none).
-void smoothPoints(const PointImage& points, int window, PointImage* smoothed) {
-  const int w = points.width, h = points.height;
-  resize(smoothed, w, h, Eigen::Vector3f::Zero().eval());
-  const size_t n = size_t(w) * size_t(h);
-  // Four channels (x, y, z, valid) filtered in one pass.
-  thread_local cv::Mat packed, sum;
-  packed.create(h, w, CV_32FC4);
-  const float* p = points.data.data()->data();
-  float* q = packed.ptr<float>();
-  for (size_t i = 0; i < n; ++i) {
-    q[4 * i] = p[3 * i];
-    q[4 * i + 1] = p[3 * i + 1];
-    q[4 * i + 2] = p[3 * i + 2];
-    q[4 * i + 3] = p[3 * i + 2] > 0.0f ? 1.0f : 0.0f;
-  }
-  cv::boxFilter(packed, sum, CV_32F, cv::Size(window, window), cv::Point(-1, -1), false,
-                cv::BORDER_CONSTANT);
-  const float* s = sum.ptr<float>();
-  float* out = smoothed->data.data()->data();
-  for (size_t i = 0; i < n; ++i) {
-    const float c = s[4 * i + 3];
-    const bool ok = c > 0.5f && p[3 * i + 2] > 0.0f;
-    const float inv = ok ? 1.0f / c : 0.0f;
-    out[3 * i] = s[4 * i] * inv;
-    out[3 * i + 1] = s[4 * i + 1] * inv;
-    out[3 * i + 2] = s[4 * i + 2] * inv;
+// dst[u] = Σ src[u + k] over k in [−r, r] and inside [0, n): a box sum with zero outside, one
+// shifted add per k so every loop vectorises (direct sums: no running-sum drift).
+void boxSumRow(const float* __restrict src, int n, int r, float* __restrict dst) {
+  std::fill(dst, dst + n, 0.0f);
+  for (int k = -r; k <= r; ++k) {
+    const int begin = std::max(0, -k), end = std::min(n, n - k);
+    for (int u = begin; u < end; ++u) dst[u] += src[u + k];
   }
 }
 
-// Normals from the smoothed points (see computeNormals).
-void normalsFromSmoothed(const PointImage& points, const PointImage& smoothed, int offset,
-                         float max_relative_distance, NormalImage* normals) {
-  const int w = points.width, h = points.height;
-  resize(normals, w, h, Eigen::Vector3f::Zero().eval());
-  const float* P = points.data.data()->data();
-  const float* S = smoothed.data.data()->data();
-  float* N = normals->data.data()->data();
-  const size_t row = size_t(w);
+// Box-filtered points over valid pixels, as planes: smoothed(u, v) = mean of the valid points in
+// the window (zero where the pixel itself or the whole window is unmeasured). Separable: each row
+// of (x, y, z, valid) is box-summed into `rows`; the columns are then running sums in double
+// (sums of floats stay exact in a double, so there is no drift down the image).
+void smoothPoints(const PointImage& points, int window, Planar3f* smoothed) {
+  const int w = points.width, h = points.height, r = window / 2;
+  const size_t n = size_t(w) * size_t(h), ws = size_t(w);
+  smoothed->resize(n);
+  thread_local std::vector<float> row_planes, rows;
+  thread_local std::vector<double> column;
+  row_planes.resize(4 * ws);
+  rows.resize(4 * n);
+  column.assign(4 * ws, 0.0);
+  const float* p = points.data.data()->data();
   for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const size_t i = size_t(v) * row + size_t(u);
-      float* n = N + 3 * i;
-      n[0] = n[1] = n[2] = 0.0f;
-      const float z = P[3 * i + 2];
-      if (!(z > 0.0f)) continue;
-      const float limit = max_relative_distance * z;
-      auto consistent = [&](size_t j) {
-        const float zj = P[3 * j + 2];
-        return zj > 0.0f && std::abs(zj - z) <= limit;
-      };
-      // Central differences where both sides are on the same surface, one-sided otherwise.
-      const bool right = u + offset < w && consistent(i + size_t(offset));
-      const bool left = u >= offset && consistent(i - size_t(offset));
-      const bool down = v + offset < h && consistent(i + size_t(offset) * row);
-      const bool up = v >= offset && consistent(i - size_t(offset) * row);
-      if (!(right || left) || !(down || up)) continue;
-      const float* c = S + 3 * i;
-      const float* r = right ? S + 3 * (i + size_t(offset)) : c;
-      const float* l = left ? S + 3 * (i - size_t(offset)) : c;
-      const float* d = down ? S + 3 * (i + size_t(offset) * row) : c;
-      const float* t = up ? S + 3 * (i - size_t(offset) * row) : c;
-      const float dx0 = r[0] - l[0], dx1 = r[1] - l[1], dx2 = r[2] - l[2];
-      const float dy0 = d[0] - t[0], dy1 = d[1] - t[1], dy2 = d[2] - t[2];
-      float n0 = dx1 * dy2 - dx2 * dy1;
-      float n1 = dx2 * dy0 - dx0 * dy2;
-      float n2 = dx0 * dy1 - dx1 * dy0;
-      const float len2 = n0 * n0 + n1 * n1 + n2 * n2;
-      if (!(len2 > 1e-24f)) continue;
-      float inv = 1.0f / std::sqrt(len2);
-      if (n0 * c[0] + n1 * c[1] + n2 * c[2] > 0.0f) inv = -inv;  // toward the camera
-      n[0] = n0 * inv;
-      n[1] = n1 * inv;
-      n[2] = n2 * inv;
+    const float* q = p + 3 * size_t(v) * ws;
+    for (size_t u = 0; u < ws; ++u) {
+      row_planes[u] = q[3 * u];
+      row_planes[ws + u] = q[3 * u + 1];
+      row_planes[2 * ws + u] = q[3 * u + 2];
+      row_planes[3 * ws + u] = q[3 * u + 2] > 0.0f ? 1.0f : 0.0f;
+    }
+    for (size_t c = 0; c < 4; ++c) {
+      boxSumRow(row_planes.data() + c * ws, w, r, rows.data() + c * n + size_t(v) * ws);
+    }
+  }
+  auto add_row = [&](int v, double sign) {
+    for (size_t c = 0; c < 4; ++c) {
+      const float* __restrict in = rows.data() + c * n + size_t(v) * ws;
+      double* __restrict acc = column.data() + c * ws;
+      for (size_t u = 0; u < ws; ++u) acc[u] += sign * double(in[u]);
+    }
+  };
+  for (int v = 0; v < std::min(r, h); ++v) add_row(v, 1.0);
+  float* __restrict sx = smoothed->x.data();
+  float* __restrict sy = smoothed->y.data();
+  float* __restrict sz = smoothed->z.data();
+  for (int v = 0; v < h; ++v) {
+    if (v + r < h) add_row(v + r, 1.0);
+    if (v - r - 1 >= 0) add_row(v - r - 1, -1.0);
+    const size_t row = size_t(v) * ws;
+    const double* __restrict cx = column.data();
+    const double* __restrict cy = cx + ws;
+    const double* __restrict cz = cy + ws;
+    const double* __restrict count = cz + ws;
+    const float* __restrict z = p + 3 * row + 2;
+    for (size_t u = 0; u < ws; ++u) {
+      const bool ok = (count[u] > 0.5) & (z[3 * u] > 0.0f);
+      const double inv = 1.0 / (ok ? count[u] : 1.0);
+      sx[row + u] = ok ? float(cx[u] * inv) : 0.0f;
+      sy[row + u] = ok ? float(cy[u] * inv) : 0.0f;
+      sz[row + u] = ok ? float(cz[u] * inv) : 0.0f;
     }
   }
 }
 
+// A neighbour at depth zj is on the pixel's surface (depth z) when measured and within `limit`.
+inline bool sameSurface(float zj, float z, float limit) {
+  return (zj > 0.0f) & (std::abs(zj - z) <= limit);
+}
+
+struct Xyz {
+  float x, y, z;
+};
+
+// The normal at a pixel from its smoothed point c and its four smoothed neighbours `offset`
+// pixels away (r, l, d, u) with flags saying whether each is on the same surface: central
+// differences where both sides are, one-sided otherwise; zero when a direction has neither or
+// the pixel is unmeasured. Turned toward the camera. Selects only, values by value: the
+// interior loop vectorises.
+inline Xyz normalFromNeighbours(bool measured, bool right, bool left, bool down, bool up, Xyz c,
+                                Xyz r, Xyz l, Xyz d, Xyz u) {
+  const Xyz a = {(right ? r.x : c.x) - (left ? l.x : c.x), (right ? r.y : c.y) - (left ? l.y : c.y),
+                 (right ? r.z : c.z) - (left ? l.z : c.z)};
+  const Xyz b = {(down ? d.x : c.x) - (up ? u.x : c.x), (down ? d.y : c.y) - (up ? u.y : c.y),
+                 (down ? d.z : c.z) - (up ? u.z : c.z)};
+  const Xyz n = {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+  const float len2 = n.x * n.x + n.y * n.y + n.z * n.z;
+  const bool ok = measured & (right | left) & (down | up) & (len2 > 1e-24f);
+  float inv = 1.0f / std::sqrt(ok ? len2 : 1.0f);
+  inv = ok ? inv : 0.0f;
+  inv = n.x * c.x + n.y * c.y + n.z * c.z > 0.0f ? -inv : inv;
+  return {n.x * inv, n.y * inv, n.z * inv};
+}
+
+// The normal of a pixel near the image border: neighbours outside the image count as not on
+// the surface.
+void normalAtBorder(const float* z_img, const Planar3f& S, int w, int h, int u, int v,
+                    int offset, float max_relative_distance, Planar3f* normals) {
+  const size_t i = size_t(v) * size_t(w) + size_t(u);
+  const float z = z_img[i];
+  const float limit = max_relative_distance * z;
+  Xyz samples[4];
+  bool flags[4];
+  const int nu[4] = {u + offset, u - offset, u, u}, nv[4] = {v, v, v + offset, v - offset};
+  for (int k = 0; k < 4; ++k) {
+    const bool inside = nu[k] >= 0 && nu[k] < w && nv[k] >= 0 && nv[k] < h;
+    const size_t j = inside ? size_t(nv[k]) * size_t(w) + size_t(nu[k]) : i;
+    flags[k] = inside && sameSurface(z_img[j], z, limit);
+    samples[k] = {S.x[j], S.y[j], S.z[j]};
+  }
+  const Xyz n = normalFromNeighbours(z > 0.0f, flags[0], flags[1], flags[2], flags[3],
+                                     {S.x[i], S.y[i], S.z[i]}, samples[0], samples[1],
+                                     samples[2], samples[3]);
+  normals->x[i] = n.x;
+  normals->y[i] = n.y;
+  normals->z[i] = n.z;
+}
+
+// Interior normals of one row (every neighbour `offset` pixels away exists).
+void normalsRow(const float* __restrict z_img, const float* __restrict sx,
+                const float* __restrict sy, const float* __restrict sz, size_t first, int count,
+                size_t o, size_t ow, float max_relative_distance, float* __restrict nx,
+                float* __restrict ny, float* __restrict nz) {
+  for (int t = 0; t < count; ++t) {
+    const size_t i = first + size_t(t);
+    const float z = z_img[i];
+    const float limit = max_relative_distance * z;
+    // Every load unconditional, then selects: the loop if-converts and vectorises.
+    const Xyz n = normalFromNeighbours(
+        z > 0.0f, sameSurface(z_img[i + o], z, limit), sameSurface(z_img[i - o], z, limit),
+        sameSurface(z_img[i + ow], z, limit), sameSurface(z_img[i - ow], z, limit),
+        {sx[i], sy[i], sz[i]}, {sx[i + o], sy[i + o], sz[i + o]},
+        {sx[i - o], sy[i - o], sz[i - o]}, {sx[i + ow], sy[i + ow], sz[i + ow]},
+        {sx[i - ow], sy[i - ow], sz[i - ow]});
+    nx[i] = n.x;
+    ny[i] = n.y;
+    nz[i] = n.z;
+  }
+}
+
+// Normals of every pixel from the smoothed points (see computeNormals).
+void normalsFromSmoothed(const float* z_img, const Planar3f& S, int w, int h, int offset,
+                         float max_relative_distance, Planar3f* normals) {
+  normals->resize(size_t(w) * size_t(h));
+  for (int v = 0; v < h; ++v) {
+    const bool border_row = v < offset || v + offset >= h || 2 * offset >= w;
+    const int interior_begin = border_row ? w : offset;
+    const int interior_end = border_row ? w : w - offset;
+    for (int u = 0; u < interior_begin; ++u) {
+      normalAtBorder(z_img, S, w, h, u, v, offset, max_relative_distance, normals);
+    }
+    normalsRow(z_img, S.x.data(), S.y.data(), S.z.data(),
+               size_t(v) * size_t(w) + size_t(interior_begin), interior_end - interior_begin,
+               size_t(offset), size_t(offset) * size_t(w), max_relative_distance,
+               normals->x.data(), normals->y.data(), normals->z.data());
+    for (int u = interior_end; u < w; ++u) {
+      normalAtBorder(z_img, S, w, h, u, v, offset, max_relative_distance, normals);
+    }
+  }
+}
+
+// One row of pair values for convexityPlanes: i-side and j-side planes, `count` pairs.
+void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
+                    const float* __restrict pzi, const float* __restrict nxi,
+                    const float* __restrict nyi, const float* __restrict nzi,
+                    const float* __restrict pxj, const float* __restrict pyj,
+                    const float* __restrict pzj, const float* __restrict nxj,
+                    const float* __restrict nyj, const float* __restrict nzj, int count,
+                    float offset_m, float max_relative_jump, float* __restrict pair) {
+  for (int t = 0; t < count; ++t) {
+    const float e0 = pxj[t] - pxi[t], e1 = pyj[t] - pyi[t], e2 = pzj[t] - pzi[t];
+    // A zero normal (unknown) has n_z == 0: normals toward the camera have n_z < 0 except at
+    // exactly grazing angles, which are boundaries anyway. Pairs across a depth jump belong to
+    // the discontinuity map, not to convexity. Normals converge along a concave bend and
+    // diverge along a convex one: (n_j − n_i)·(p_j − p_i) < −offset is concave (symmetric in
+    // i and j, so a normal leaning across a nearby convex edge does not fake a concavity).
+    const float bend = (nxj[t] - nxi[t]) * e0 + (nyj[t] - nyi[t]) * e1 + (nzj[t] - nzi[t]) * e2;
+    // Chained selects: each compiles to a vector blend (with -fno-trapping-math).
+    float value = nxi[t] * nxj[t] + nyi[t] * nyj[t] + nzi[t] * nzj[t];
+    value = bend < -offset_m ? value : 1.0f;
+    value = std::abs(e2) <= max_relative_jump * pzi[t] ? value : 1.0f;
+    value = nzi[t] != 0.0f ? value : 1.0f;
+    value = nzj[t] != 0.0f ? value : 1.0f;
+    pair[t] = value;
+  }
+}
+
+// Min-convexity over planes (see convexityMap). Each pair (i, j) is visited once, from its first
+// pixel, and its value lowers both pixels' minimum: 4 forward directions cover the
+// 8-neighbourhood at distance k. Per row, the pair values go to `pair` first and are then
+// min-ed into both ends: every loop is branch-free and vectorises.
+void convexityPlanes(const Planar3f& P, const Planar3f& N, int w, int h, int window,
+                     float offset_m, float max_relative_jump, float* __restrict C) {
+  const int k = std::max(1, window / 2);
+  std::fill(C, C + size_t(w) * size_t(h), 1.0f);
+  thread_local std::vector<float> pair_storage;
+  pair_storage.resize(size_t(w));
+  float* __restrict pair = pair_storage.data();
+  const int du[4] = {k, 0, k, -k};
+  const int dv[4] = {0, k, k, k};
+  const float* __restrict px = P.x.data();
+  const float* __restrict py = P.y.data();
+  const float* __restrict pz = P.z.data();
+  const float* __restrict nx = N.x.data();
+  const float* __restrict ny = N.y.data();
+  const float* __restrict nz = N.z.data();
+  for (int d = 0; d < 4; ++d) {
+    const ptrdiff_t step = ptrdiff_t(dv[d]) * w + du[d];
+    const int u_begin = std::max(0, -du[d]), u_end = std::min(w, w - du[d]);
+    if (u_end <= u_begin) continue;
+    for (int v = 0; v + dv[d] < h; ++v) {
+      const size_t first = size_t(v) * size_t(w) + size_t(u_begin);
+      const int count = u_end - u_begin;
+      const size_t second = size_t(ptrdiff_t(first) + step);
+      convexityPairs(px + first, py + first, pz + first, nx + first, ny + first, nz + first,
+                     px + second, py + second, pz + second, nx + second, ny + second,
+                     nz + second, count, offset_m, max_relative_jump, pair);
+      float* __restrict ci = C + first;
+      for (int t = 0; t < count; ++t) ci[t] = std::min(ci[t], pair[t]);
+      float* __restrict cj = C + second;
+      for (int t = 0; t < count; ++t) cj[t] = std::min(cj[t], pair[t]);
+    }
+  }
+}
+
+void toPlanes(const Image<Eigen::Vector3f>& image, Planar3f* planes) {
+  const size_t n = image.data.size();
+  planes->resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    planes->x[i] = image.data[i].x();
+    planes->y[i] = image.data[i].y();
+    planes->z[i] = image.data[i].z();
+  }
+}
+
+void fromPlanes(const Planar3f& planes, int w, int h, Image<Eigen::Vector3f>* image) {
+  resize(image, w, h, Eigen::Vector3f::Zero().eval());
+  for (size_t i = 0; i < image->data.size(); ++i) {
+    image->data[i] = Eigen::Vector3f(planes.x[i], planes.y[i], planes.z[i]);
+  }
+}
+
 // Grows labels into unlabelled measured pixels (see DepthSegmenter::segment).
-void growLabels(const DepthImage& depth, const PointImage& points, const NormalImage& normals,
+bool hasNormal(const Planar3f& normals, size_t i) {
+  return normals.x[i] != 0.0f || normals.y[i] != 0.0f || normals.z[i] != 0.0f;
+}
+
+void growLabels(const DepthImage& depth, const PointImage& points, const Planar3f& normals,
                 int iterations, float max_distance, LabelImage* labels) {
   const int w = depth.width, h = depth.height;
   int32_t* L = labels->data.data();
   // Only pixels with a normal join a segment: segments promise unit normals.
   auto unlabelled = [&](size_t i) {
-    const Eigen::Vector3f& n = normals.data[i];
-    return L[i] == 0 && depth.data[i] > 0.0f && (n.x() != 0.0f || n.y() != 0.0f || n.z() != 0.0f);
+    return L[i] == 0 && depth.data[i] > 0.0f && hasNormal(normals, i);
   };
   std::vector<uint32_t> frontier, next;
   std::vector<std::pair<uint32_t, int32_t>> changes;
@@ -271,51 +438,24 @@ void growLabels(const DepthImage& depth, const PointImage& points, const NormalI
 
 void computeNormals(const PointImage& points, int window, float max_relative_distance,
                     NormalImage* normals) {
-  PointImage smoothed;
+  const int w = points.width, h = points.height;
+  Planar3f smoothed, planes;
   smoothPoints(points, smoothingWindow(window), &smoothed);
-  normalsFromSmoothed(points, smoothed, differenceOffset(window), max_relative_distance, normals);
+  std::vector<float> z(points.data.size());
+  for (size_t i = 0; i < z.size(); ++i) z[i] = std::max(0.0f, points.data[i].z());
+  normalsFromSmoothed(z.data(), smoothed, w, h, differenceOffset(window), max_relative_distance,
+                      &planes);
+  fromPlanes(planes, w, h, normals);
 }
 
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
                   float offset_m, float max_relative_jump, Image<float>* convexity) {
-  const int w = points.width, h = points.height, k = std::max(1, window / 2);
+  const int w = points.width, h = points.height;
   resize(convexity, w, h, 1.0f);
-  std::fill(convexity->data.begin(), convexity->data.end(), 1.0f);
-  // Each pair (i, j) is visited once, from its first pixel, and its value lowers both pixels'
-  // minimum: 4 forward directions cover the 8-neighbourhood at distance k.
-  const int du[4] = {k, 0, k, -k};
-  const int dv[4] = {0, k, k, k};
-  const float* P = points.data.data()->data();
-  const float* N = normals.data.data()->data();
-  float* C = convexity->data.data();
-  // Direction outermost and exact row ranges: the inner loop has no bounds checks.
-  for (int d = 0; d < 4; ++d) {
-    const ptrdiff_t step = ptrdiff_t(dv[d]) * w + du[d];
-    const int u_begin = std::max(0, -du[d]), u_end = std::min(w, w - du[d]);
-    for (int v = 0; v + dv[d] < h; ++v) {
-      for (int u = u_begin; u < u_end; ++u) {
-        const size_t i = size_t(v) * size_t(w) + size_t(u);
-        const size_t j = size_t(ptrdiff_t(i) + step);
-        const float* n = N + 3 * i;
-        const float* nj = N + 3 * j;
-        // A zero normal (unknown) has n[2] == 0: normals toward the camera have n[2] < 0
-        // except at exactly grazing angles, which are boundaries anyway.
-        if (n[2] == 0.0f || nj[2] == 0.0f) continue;
-        const float* p = P + 3 * i;
-        const float* pj = P + 3 * j;
-        // Pairs across a depth jump belong to the discontinuity map, not to convexity.
-        if (std::abs(pj[2] - p[2]) > max_relative_jump * p[2]) continue;
-        const float e0 = pj[0] - p[0], e1 = pj[1] - p[1], e2 = pj[2] - p[2];
-        // Normals converge along a concave bend and diverge along a convex one:
-        // (n_j − n_i)·(p_j − p_i) < 0 is concave. Symmetric in i and j, so a normal that leans
-        // across a nearby convex edge does not fake a concavity.
-        if ((nj[0] - n[0]) * e0 + (nj[1] - n[1]) * e1 + (nj[2] - n[2]) * e2 >= -offset_m) continue;
-        const float dot = n[0] * nj[0] + n[1] * nj[1] + n[2] * nj[2];
-        C[i] = std::min(C[i], dot);
-        C[j] = std::min(C[j], dot);
-      }
-    }
-  }
+  Planar3f p, n;
+  toPlanes(points, &p);
+  toPlanes(normals, &n);
+  convexityPlanes(p, n, w, h, window, offset_m, max_relative_jump, convexity->data.data());
 }
 
 DepthSegmenter::DepthSegmenter(const SegmentationParams& params, const Intrinsics& intrinsics)
@@ -374,42 +514,47 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   result.timings.discontinuity_ms = msSince(t);
 
   t = Clock::now();
-  PointImage& smoothed = smoothed_;
-  smoothPoints(points_, smoothingWindow(params_.normal_window_px), &smoothed);
-  normalsFromSmoothed(points_, smoothed, differenceOffset(params_.normal_window_px),
+  smoothPoints(points_, smoothingWindow(params_.normal_window_px), &smoothed_);
+  normalsFromSmoothed(depth_.data.data(), smoothed_, w, h,
+                      differenceOffset(params_.normal_window_px),
                       params_.normal_max_relative_distance, &normals_);
   result.timings.normals_ms = msSince(t);
 
   t = Clock::now();
   // Smoothed points: the tangent-plane test must not flip with per-pixel noise.
-  convexityMap(smoothed, normals_, params_.convexity_window_px, params_.convexity_offset_m,
-               params_.normal_max_relative_distance, &convexity_);
+  resize(&convexity_, w, h, 1.0f);
+  convexityPlanes(smoothed_, normals_, w, h, params_.convexity_window_px,
+                  params_.convexity_offset_m, params_.normal_max_relative_distance,
+                  convexity_.data.data());
   result.timings.convexity_ms = msSince(t);
 
   t = Clock::now();
   resize(&boundaries_, w, h, uint8_t{0});
   cv::Mat free_space(h, w, CV_8U);
   for (size_t i = 0; i < n_pixels; ++i) {
-    const Eigen::Vector3f& n = normals_.data[i];
     const bool boundary = !(depth_.data[i] > 0.0f) || edges_.data[i] != 0 ||
                           convexity_.data[i] < params_.convexity_threshold ||
-                          (n.x() == 0.0f && n.y() == 0.0f && n.z() == 0.0f);
+                          !hasNormal(normals_, i);
     boundaries_.data[i] = boundary ? 1 : 0;
     free_space.data[i] = boundary ? 0 : 1;
   }
-  cv::Mat components, stats, centroids;
+  // Components into a reused buffer; areas from one histogram pass (OpenCV's stats would also
+  // compute bounding boxes and centroids we do not use).
+  thread_local cv::Mat components;
   const int n_components =
-      cv::connectedComponentsWithStats(free_space, components, stats, centroids, 4, CV_32S);
+      cv::connectedComponents(free_space, components, 4, CV_32S, cv::CCL_DEFAULT);
+  const int32_t* comp = components.ptr<int32_t>();
+  std::vector<uint32_t> area(size_t(n_components), 0);
+  for (size_t i = 0; i < n_pixels; ++i) ++area[size_t(comp[i])];
   std::vector<int32_t> final_label(size_t(n_components), 0);
   int32_t next = 0;
   for (int c = 1; c < n_components; ++c) {
-    if (stats.at<int>(c, cv::CC_STAT_AREA) >= min_segment_px_) {
+    if (area[size_t(c)] >= uint32_t(min_segment_px_)) {
       final_label[size_t(c)] = ++next;
     } else {
       ++result.dropped_small;
     }
   }
-  const int32_t* comp = components.ptr<int32_t>();
   for (size_t i = 0; i < n_pixels; ++i) result.labels.data[i] = final_label[size_t(comp[i])];
 
   // Grow labels into boundary pixels whose 3D point is close to a labelled neighbour's, one ring
@@ -439,7 +584,7 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
     Segment& s = result.segments[size_t(l - 1)];
     s.pixels.push_back(uint32_t(i));
     s.points.push_back(points_.data[i]);
-    s.normals.push_back(normals_.data[i]);
+    s.normals.emplace_back(normals_.x[i], normals_.y[i], normals_.z[i]);
     if (color) {
       const Rgb8 c = color->data[i];
       color_sums[size_t(l - 1)] += Eigen::Vector3d(c.r, c.g, c.b);
@@ -457,7 +602,7 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   if (maps) {
     maps->depth = depth_;
     maps->discontinuities = edges_;
-    maps->normals = normals_;
+    fromPlanes(normals_, w, h, &maps->normals);
     maps->convexity = convexity_;
     maps->boundaries = boundaries_;
   }

@@ -53,6 +53,17 @@ void computeNormals(const PointImage& points, int window, float max_relative_dis
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
                   float offset_m, float max_relative_jump, Image<float>* convexity);
 
+// Three float planes (x, y, z) of a w × h image: the segmenter's internal layout, which the
+// compiler can vectorise.
+struct Planar3f {
+  std::vector<float> x, y, z;
+  void resize(size_t n) {
+    x.resize(n);
+    y.resize(n);
+    z.resize(n);
+  }
+};
+
 // Segments of one frame.
 struct Segment {
   int32_t label = 0;                       // 1.. in this frame
@@ -109,8 +120,8 @@ class DepthSegmenter {
   // Scratch buffers reused between frames.
   DepthImage depth_;
   PointImage points_;
-  PointImage smoothed_;
-  NormalImage normals_;
+  Planar3f smoothed_;
+  Planar3f normals_;
   MaskImage edges_;
   MaskImage boundaries_;
   Image<float> convexity_;
