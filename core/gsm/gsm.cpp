@@ -8,14 +8,6 @@
 namespace objdb::gsm {
 namespace {
 
-uint64_t packVoxel(const tsdf::VoxelIndex& v) {
-  auto f = [](int c) { return uint64_t(uint32_t(c + (1 << 20)) & 0x1fffff); };
-  return f(v.x()) | (f(v.y()) << 21) | (f(v.z()) << 42);
-}
-tsdf::VoxelIndex unpackVoxel(uint64_t k) {
-  auto g = [](uint64_t bits) { return int(bits & 0x1fffff) - (1 << 20); };
-  return {g(k), g(k >> 21), g(k >> 42)};
-}
 uint64_t packPair(Label a, Label b) {
   return a < b ? (uint64_t(a) << 32) | b : (uint64_t(b) << 32) | a;
 }
@@ -42,6 +34,41 @@ struct FrameVotes {
 
 }  // namespace
 
+// The frame's points bundled per voxel, grouped by block: one hash lookup per block run of
+// pixels instead of one per pixel, and one label-block lookup per block in the later passes.
+struct Gsm::FrameScratch {
+  struct Block {
+    tsdf::BlockIndex index;
+    std::vector<FrameVotes> votes;   // voxels_per_side³, all empty between frames
+    std::vector<uint32_t> touched;   // linear indices with votes this frame
+  };
+  std::vector<Block> blocks;         // the first `used` are this frame's
+  size_t used = 0;
+  absl::flat_hash_map<tsdf::BlockIndex, uint32_t, tsdf::BlockIndexHash> slot;
+
+  Block& blockFor(const tsdf::BlockIndex& index, size_t voxels_per_block) {
+    auto [it, inserted] = slot.try_emplace(index, uint32_t(used));
+    if (!inserted) return blocks[it->second];
+    if (used == blocks.size()) blocks.emplace_back();
+    Block& block = blocks[used++];
+    block.index = index;
+    if (block.votes.size() != voxels_per_block) block.votes.assign(voxels_per_block, FrameVotes{});
+    return block;
+  }
+  void reset() {
+    for (size_t i = 0; i < used; ++i) {
+      for (uint32_t v : blocks[i].touched) blocks[i].votes[v] = FrameVotes{};
+      blocks[i].touched.clear();
+    }
+    used = 0;
+    slot.clear();
+  }
+};
+
+Gsm::Gsm(Gsm&&) noexcept = default;
+Gsm& Gsm::operator=(Gsm&&) noexcept = default;
+Gsm::~Gsm() = default;
+
 StatusOr<Gsm> Gsm::create(const TsdfParams& tsdf_params, const GsmParams& gsm_params,
                           const Intrinsics& intrinsics, int threads) {
   OBJDB_RETURN_IF_ERROR(gsm_params.validate());
@@ -60,14 +87,12 @@ Gsm::Gsm(const TsdfParams& tsdf_params, const GsmParams& gsm_params,
     : tsdf_params_(tsdf_params),
       params_(gsm_params),
       integrator_(std::move(integrator)),
-      layer_(std::move(layer)) {}
+      layer_(std::move(layer)),
+      scratch_(std::make_unique<FrameScratch>()) {}
 
 Label Gsm::resolve(Label label) const {
-  auto it = parent_.find(label);
-  while (it != parent_.end() && it->second != label) {
-    label = it->second;
-    it = parent_.find(label);
-  }
+  if (label >= parent_.size()) return label;
+  while (parent_[label] != label) label = parent_[label];
   return label;
 }
 
@@ -103,16 +128,9 @@ Label Gsm::mainLabel(const tsdf::VoxelIndex& v) const {
   return voxel ? mainOf(*voxel) : 0;
 }
 
-LabelVoxel& Gsm::labelVoxelFor(const tsdf::VoxelIndex& v) {
-  const int vps = layer_.voxelsPerSide();
-  auto& block = label_blocks_[layer_.blockOfVoxel(v)];
-  if (block.empty()) block.resize(size_t(vps) * vps * vps);
-  return block[layer_.linearInBlock(v)];
-}
-
 Label Gsm::newLabel() {
   const Label label = next_label_++;
-  parent_[label] = label;
+  parent_.push_back(label);
   info_[label];
   return label;
 }
@@ -148,10 +166,15 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   const Eigen::Isometry3f T = T_world_camera.cast<float>();
   const Intrinsics& k = intrinsics_;
   const int w = depth.width, h = depth.height;
+  const int vps = layer_.voxelsPerSide();
+  const size_t voxels_per_block = size_t(vps) * size_t(vps) * size_t(vps);
   int32_t n_segments = 0;
   for (int32_t l : labels.data) n_segments = std::max(n_segments, l);
   std::vector<uint32_t> segment_size(size_t(n_segments) + 1, 0);
-  absl::flat_hash_map<uint64_t, FrameVotes> votes;  // points bundled per voxel
+  FrameScratch& scratch = *scratch_;
+  scratch.reset();
+  // Points bundled per voxel; consecutive pixels mostly fall into the same block.
+  FrameScratch::Block* current = nullptr;
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const size_t i = size_t(v) * size_t(w) + size_t(u);
@@ -164,18 +187,33 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
       const Eigen::Vector3f p = T * Eigen::Vector3f(float((u - k.cx) * z / k.fx),
                                                     float((v - k.cy) * z / k.fy), z);
       const tsdf::VoxelIndex voxel = layer_.voxelIndexOf(p);
+      const tsdf::BlockIndex block = layer_.blockOfVoxel(voxel);
+      if (current == nullptr || current->index != block) {
+        current = &scratch.blockFor(block, voxels_per_block);
+      }
+      const Eigen::Vector3i local = voxel - block * vps;
+      const size_t lin =
+          size_t(local.x()) + size_t(vps) * (size_t(local.y()) + size_t(vps) * size_t(local.z()));
+      FrameVotes& frame_votes = current->votes[lin];
+      if (frame_votes.segment[0] == 0) current->touched.push_back(uint32_t(lin));
+      frame_votes.add(s);
       ++segment_size[size_t(s)];
-      votes[packVoxel(voxel)].add(s);
     }
   }
   // Segment × label overlaps, counted once per voxel from the bundled points.
   absl::flat_hash_map<uint64_t, uint32_t> overlap;  // (segment << 32 | main label) → points
-  for (const auto& [key, frame_votes] : votes) {
-    const Label g = mainLabel(unpackVoxel(key));
-    if (g == 0) continue;
-    for (int k = 0; k < 2; ++k) {
-      if (frame_votes.segment[k] != 0) {
-        overlap[(uint64_t(uint32_t(frame_votes.segment[k])) << 32) | g] += frame_votes.count[k];
+  for (size_t b = 0; b < scratch.used; ++b) {
+    const FrameScratch::Block& block = scratch.blocks[b];
+    const auto it = label_blocks_.find(block.index);
+    if (it == label_blocks_.end()) continue;
+    for (uint32_t lin : block.touched) {
+      const Label g = mainOf(it->second[lin]);
+      if (g == 0) continue;
+      const FrameVotes& frame_votes = block.votes[lin];
+      for (int j = 0; j < 2; ++j) {
+        if (frame_votes.segment[j] != 0) {
+          overlap[(uint64_t(uint32_t(frame_votes.segment[j])) << 32) | g] += frame_votes.count[j];
+        }
       }
     }
   }
@@ -219,30 +257,55 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   }
   for (Label& l : result.segment_labels) l = l ? resolve(l) : 0;
 
-  // One vote per voxel per frame, for the segment with most points in it.
-  for (const auto& [key, frame_votes] : votes) {
-    const int32_t s = frame_votes.winner();
-    const Label label = result.segment_labels[size_t(s - 1)];
-    if (label == 0) continue;
-    const tsdf::VoxelIndex v = unpackVoxel(key);
-    LabelVoxel& voxel = labelVoxelFor(v);
-    const Label before = voxel.mainLabel();
-    if (params_.label_history) {
-      voxel.vote(label);
-    } else {
-      voxel.voteSingle(label);
+  // One vote per voxel per frame, for the segment with most points in it. Per block, the
+  // labels voted for are gathered first so their bookkeeping is updated once per block.
+  struct BlockLabel {
+    Label label;
+    Eigen::AlignedBox3i bounds;
+  };
+  std::vector<BlockLabel> block_labels;
+  for (size_t b = 0; b < scratch.used; ++b) {
+    const FrameScratch::Block& block = scratch.blocks[b];
+    std::vector<LabelVoxel>& label_block = label_blocks_[block.index];
+    if (label_block.empty()) label_block.resize(voxels_per_block);
+    const tsdf::VoxelIndex block_origin = block.index * vps;
+    block_labels.clear();
+    for (uint32_t lin : block.touched) {
+      const int32_t s = block.votes[lin].winner();
+      const Label label = result.segment_labels[size_t(s - 1)];
+      if (label == 0) continue;
+      LabelVoxel& voxel = label_block[lin];
+      const Label before = voxel.mainLabel();
+      if (params_.label_history) {
+        voxel.vote(label);
+      } else {
+        voxel.voteSingle(label);
+      }
+      const Label after = voxel.mainLabel();
+      if (before != after) {
+        if (before != 0) --info_[resolve(before)].voxels;
+        ++info_[resolve(after)].voxels;
+      }
+      const tsdf::VoxelIndex v =
+          block_origin + tsdf::VoxelIndex(int(lin % uint32_t(vps)),
+                                          int((lin / uint32_t(vps)) % uint32_t(vps)),
+                                          int(lin / uint32_t(vps * vps)));
+      auto it = std::find_if(block_labels.begin(), block_labels.end(),
+                             [&](const BlockLabel& bl) { return bl.label == label; });
+      if (it == block_labels.end()) {
+        block_labels.push_back({label, Eigen::AlignedBox3i(v)});
+      } else {
+        it->bounds.extend(v);
+      }
+      ++result.voted_voxels;
     }
-    const Label after = voxel.mainLabel();
-    if (before != after) {
-      if (before != 0) --info_[resolve(before)].voxels;
-      ++info_[resolve(after)].voxels;
+    for (const BlockLabel& bl : block_labels) {
+      LabelInfo& info = info_[bl.label];
+      info.last_update_frame = frame_;
+      info.extracted_frame = -1;
+      info.blocks.insert(block.index);
+      info.bounds.extend(bl.bounds);
     }
-    LabelInfo& info = info_[label];
-    info.last_update_frame = frame_;
-    info.extracted_frame = -1;
-    info.blocks.insert(layer_.blockOfVoxel(v));
-    info.bounds.extend(v);
-    ++result.voted_voxels;
   }
   ++frame_;
   return result;

@@ -54,6 +54,9 @@ class Gsm {
  public:
   static StatusOr<Gsm> create(const TsdfParams& tsdf_params, const GsmParams& gsm_params,
                               const Intrinsics& intrinsics, int threads = 1);
+  Gsm(Gsm&&) noexcept;
+  Gsm& operator=(Gsm&&) noexcept;
+  ~Gsm();
 
   // Fuses one segmented frame: `labels` are the frame's segment labels per pixel (0 = none), as
   // DepthSegmenter produces. Errors leave the map unchanged.
@@ -85,7 +88,7 @@ class Gsm {
   Label newLabel();
   void merge(Label keep, Label gone);
   Label mainOf(const LabelVoxel& voxel) const;
-  LabelVoxel& labelVoxelFor(const tsdf::VoxelIndex& v);
+  struct FrameScratch;  // per-frame votes grouped by block, reused between frames
 
   TsdfParams tsdf_params_;
   GsmParams params_;
@@ -94,10 +97,11 @@ class Gsm {
   tsdf::TsdfLayer layer_;
   absl::flat_hash_map<tsdf::BlockIndex, std::vector<LabelVoxel>, tsdf::BlockIndexHash> label_blocks_;
   absl::flat_hash_map<Label, LabelInfo> info_;          // roots only
-  absl::flat_hash_map<Label, Label> parent_;            // union–find over all labels ever made
+  std::vector<Label> parent_ = {0};  // union–find over all labels ever made (index = label)
   absl::flat_hash_map<uint64_t, int> merge_evidence_;   // (a, b) packed → frames seen together
   Label next_label_ = 1;
   int64_t frame_ = 0;
+  std::unique_ptr<FrameScratch> scratch_;
 };
 
 }  // namespace objdb::gsm

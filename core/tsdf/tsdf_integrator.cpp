@@ -100,15 +100,20 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
       TsdfBlock& block = *blocks[k];
       const Eigen::Vector3i base = indices[k] * vps;
       bool any = false;
+      // Voxel centres in the camera frame, stepped along x: one add per voxel.
+      const Eigen::Vector3f step_x = T_cw.linear() * Eigen::Vector3f(voxel, 0.0f, 0.0f);
       for (int z = 0; z < vps; ++z) {
         for (int y = 0; y < vps; ++y) {
+          Eigen::Vector3f c = T_cw * layer->voxelCenter(base + Eigen::Vector3i(0, y, z)) - step_x;
           for (int x = 0; x < vps; ++x) {
-            const Eigen::Vector3f center = layer->voxelCenter(base + Eigen::Vector3i(x, y, z));
-            const Eigen::Vector3f c = T_cw * center;
+            c += step_x;
             if (!(c.z() > 0.0f)) continue;
-            const int u = int(std::lround(fx * c.x() / c.z() + cx));
-            const int v = int(std::lround(fy * c.y() / c.z() + cy));
-            if (u < 0 || v < 0 || u >= w || v >= h) continue;
+            // Nearest pixel: the range test on the shifted coordinate first, then truncation
+            // (cheaper than lround, and NaN fails the test).
+            const float fu = fx * c.x() / c.z() + cx + 0.5f;
+            const float fv = fy * c.y() / c.z() + cy + 0.5f;
+            if (!(fu >= 0.0f && fv >= 0.0f && fu < float(w) && fv < float(h))) continue;
+            const int u = int(fu), v = int(fv);
             const float d = depth.data[size_t(v) * w + u];
             if (!(isValidDepth(d) && d >= params_.min_ray_length_m && d <= params_.max_ray_length_m)) {
               continue;
