@@ -7,6 +7,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/support/meshes.h"
+
 #include "tests/support/temp_dir.h"
 
 namespace objdb::io {
@@ -17,20 +19,7 @@ using objdb::testing::TempDir;
 using objdb::testing::writeTextFile;
 using ::testing::HasSubstr;
 
-// Unit cube [0,1]^3 with outward winding.
-TriangleMesh unitCube() {
-  TriangleMesh mesh;
-  for (int i = 0; i < 8; ++i) {
-    mesh.vertices.emplace_back(float(i & 1), float((i >> 1) & 1), float((i >> 2) & 1));
-  }
-  const int faces[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
-                           {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  for (const auto& f : faces) {
-    mesh.triangles.emplace_back(f[0], f[1], f[2]);
-    mesh.triangles.emplace_back(f[0], f[2], f[3]);
-  }
-  return mesh;
-}
+TriangleMesh unitCube() { return objdb::testing::unitCubeMesh(); }
 
 TriangleMesh colouredCube() {
   TriangleMesh mesh = unitCube();
