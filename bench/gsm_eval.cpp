@@ -17,7 +17,9 @@
 
 #include <opencv2/core.hpp>
 
+#include "absl/strings/str_format.h"
 #include "core/common/mesh_distance.h"
+#include "core/common/params_io.h"
 #include "core/gsm/gsm.h"
 #include "core/tsdf/mesh_extraction.h"
 #include "core/segmentation/depth_segmenter.h"
@@ -39,6 +41,8 @@ int main(int argc, char** argv) {
   float voxel = 0.02f;
   int per_session = 100, sessions = 1;
   double label_noise = 0.0;
+  bool verbose = false;
+  Params params;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--camera" && i + 1 < argc) {
@@ -49,11 +53,21 @@ int main(int argc, char** argv) {
       per_session = std::max(1, std::atoi(argv[++i]));
     } else if (a == "--label-noise" && i + 1 < argc) {
       label_noise = std::clamp(std::atof(argv[++i]), 0.0, 1.0);
+    } else if (a == "--config" && i + 1 < argc) {
+      auto loaded = loadParamsFile(argv[++i]);
+      if (!loaded.ok()) {
+        std::fprintf(stderr, "gsm_eval: %s\n", std::string(loaded.status().message()).c_str());
+        return 1;
+      }
+      params = *loaded;
+    } else if (a == "--per-object") {
+      verbose = true;
     } else if (a == "--sessions" && i + 1 < argc) {
       sessions = std::clamp(std::atoi(argv[++i]), 1, 3);
     } else {
       std::fprintf(stderr, "usage: gsm_eval [--camera vga|tango] [--voxel-size M] "
-                           "[--frames-per-session N] [--sessions N] [--label-noise P]\n");
+                           "[--frames-per-session N] [--sessions N] [--label-noise P] "
+                           "[--per-object] [--config FILE.json]\n");
       return 2;
     }
   }
@@ -87,13 +101,13 @@ int main(int argc, char** argv) {
     const int si = run / 2;
     const bool history = run % 2 == 0;
     const sim::Scene& scene = scenes[size_t(si)];
-    GsmParams gsm_params;
+    GsmParams gsm_params = params.gsm;
     gsm_params.label_history = history;
     const auto built = sim::buildScene(scene).value();
     const auto poses = sim::sampleTrajectory(scene.trajectory).value();
     const sim::Renderer renderer(scene.intrinsics);
-    auto segmenter = segmentation::DepthSegmenter::create(SegmentationParams(), scene.intrinsics).value();
-    TsdfParams tsdf;
+    auto segmenter = segmentation::DepthSegmenter::create(params.segmentation, scene.intrinsics).value();
+    TsdfParams tsdf = params.tsdf;
     tsdf.voxel_size_m = voxel;
     tsdf.truncation_voxels = 0.06f / voxel;  // 6 cm at every voxel size (3 voxels at 2 cm)
     gsm::Gsm map = gsm::Gsm::create(tsdf, gsm_params, scene.intrinsics).value();
@@ -141,7 +155,7 @@ int main(int argc, char** argv) {
     }
     gsm::Gsm pipelined = gsm::Gsm::create(tsdf, gsm_params, scene.intrinsics).value();
     auto pipe_segmenter =
-        segmentation::DepthSegmenter::create(SegmentationParams(), scene.intrinsics).value();
+        segmentation::DepthSegmenter::create(params.segmentation, scene.intrinsics).value();
     const auto pipe_start = std::chrono::steady_clock::now();
     std::future<segmentation::SegmentationResult> next = std::async(std::launch::async, [&] {
       return pipe_segmenter.segment(input[0].depth).value();
@@ -173,11 +187,23 @@ int main(int argc, char** argv) {
     }
     double worst = 1.0, sum = 0.0;
     int objects = 0;
+    std::string per_object;
     for (const auto& [id, n] : object_voxels) {
       if (structure.count(id)) continue;
-      size_t best = 0;
-      for (const auto& [l, c] : by_label[id]) best = std::max(best, c);
+      size_t best = 0, parts = 0, labelled = 0;
+      for (const auto& [l, c] : by_label[id]) {
+        best = std::max(best, c);
+        parts += c * 10 > n ? 1 : 0;
+        labelled += c;
+      }
       const double share = double(best) / double(n);
+      std::string kind;
+      for (const auto& o : scene.objects) {
+        if (uint16_t(o.id) == id) kind = o.category;
+      }
+      per_object += absl::StrFormat("%s%d %s %.2f (%zu labels > 10 %%, %.0f %% unlabelled)",
+                                    per_object.empty() ? "" : "; ", id, kind, share, parts,
+                                    100.0 * (1.0 - double(labelled) / double(n)));
       worst = std::min(worst, share);
       sum += share;
       ++objects;
@@ -187,13 +213,24 @@ int main(int argc, char** argv) {
       size_t total = 0, above = 0;
       for (const auto& [id, c] : objects_in) total += c;
       for (const auto& [id, c] : objects_in) above += c > total / 10 ? 1 : 0;
+      // Only labels the database would get: smaller ones are never extracted.
+      if (total < size_t(gsm_params.min_label_voxels)) continue;
       ++labels;
       spanning += above >= 2 ? 1 : 0;
+      if (verbose && above >= 2) {
+        std::string parts;
+        for (const auto& [id, c] : objects_in) {
+          if (c > total / 10) parts += absl::StrFormat(" %d:%zu", id, c);
+        }
+        std::printf("%-10s label %u spans objects (id:voxels)%s of %zu voxels\n", "", l,
+                    parts.c_str(), total);
+      }
     }
     std::printf("%-10s %-7s %8.2f %8.2f %8.2f %8.1f %7zu %8zu %5.2f/%4.2f %6zu/%zu\n",
                 scene.name.c_str(), history ? "history" : "single", seg_ms / double(frames), gsm_ms / double(frames),
                 (seg_ms + gsm_ms) / double(frames), 1000.0 * double(frames) / (seg_ms + gsm_ms),
                 map.numLabels(), merges, objects ? sum / objects : 0.0, worst, spanning, labels);
+    if (verbose) std::printf("%-10s per object: %s\n", "", per_object.c_str());
     std::printf("%-10s pipelined on 2 threads (segment k+1 while fusing k): %.1f Hz\n", "",
                 pipeline_hz);
     if (history) {
@@ -227,6 +264,7 @@ int main(int argc, char** argv) {
               "confidence per voxel (Tateno et al., the ablation).\n");
   std::printf("best cov.: mean / worst over objects (floor, walls excluded) of the best GSM "
               "label's share of the object's voxels; span 2 obj.: labels with >= 2 objects above "
-              "10 %% of their voxels / labels. One thread.\n");
+              "10 %% of their voxels / labels with at least min_label_voxels voxels (the ones "
+              "extraction hands to the database). One thread.\n");
   return 0;
 }
