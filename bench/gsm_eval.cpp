@@ -18,6 +18,7 @@
 #include <opencv2/core.hpp>
 
 #include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
 #include "core/common/mesh_distance.h"
 #include "core/common/params_io.h"
 #include "core/gsm/gsm.h"
@@ -140,10 +141,7 @@ int main(int argc, char** argv) {
           if (!isValidDepth(z) || id == 0 || z > tsdf.max_ray_length_m) continue;
           const Eigen::Vector3f p = T * Eigen::Vector3f(float((u - k.cx) * z / k.fx), float((v - k.cy) * z / k.fy), z);
           const tsdf::VoxelIndex x = map.tsdf().voxelIndexOf(p);
-          const uint64_t key = (uint64_t(uint32_t(x.x() + (1 << 20))) & 0x1fffff) |
-                               ((uint64_t(uint32_t(x.y() + (1 << 20))) & 0x1fffff) << 21) |
-                               ((uint64_t(uint32_t(x.z() + (1 << 20))) & 0x1fffff) << 42);
-          truth[key].vote(id);
+          truth[packGridKey(x)].vote(id);
         }
       }
     }
@@ -176,8 +174,7 @@ int main(int argc, char** argv) {
     std::map<gsm::Label, std::map<uint16_t, size_t>> label_objects;
     for (const auto& [key, voxel_truth] : truth) {
       const uint16_t id = uint16_t(voxel_truth.mainLabel());
-      auto g = [](uint64_t bits) { return int(bits & 0x1fffff) - (1 << 20); };
-      const tsdf::VoxelIndex x(g(key), g(key >> 21), g(key >> 42));
+      const tsdf::VoxelIndex x = unpackGridKey(key);
       const gsm::Label l = map.mainLabel(x);
       ++object_voxels[id];
       if (l != 0) {

@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 
 #include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
 
 namespace objdb {
 namespace {
@@ -38,11 +39,6 @@ float pointTriangleDistance(const Eigen::Vector3f& p, const Eigen::Vector3f& a,
   // Outside: the nearest point lies on an edge.
   return std::min({pointSegmentDistance(p, a, b), pointSegmentDistance(p, b, c),
                    pointSegmentDistance(p, c, a)});
-}
-
-uint64_t MeshDistance::key(const Eigen::Vector3i& cell) {
-  auto f = [](int x) { return uint64_t(uint32_t(x + (1 << 20)) & 0x1fffffu); };
-  return f(cell.x()) | (f(cell.y()) << 21) | (f(cell.z()) << 42);
 }
 
 Eigen::Vector3i MeshDistance::cellOf(const Eigen::Vector3f& p) const {
@@ -80,7 +76,7 @@ StatusOr<MeshDistance> MeshDistance::create(const TriangleMesh& mesh, float max_
     for (int z = c0.z(); z <= c1.z(); ++z) {
       for (int y = c0.y(); y <= c1.y(); ++y) {
         for (int x = c0.x(); x <= c1.x(); ++x) {
-          index.cells_[key({x, y, z})].push_back(uint32_t(t));
+          index.cells_[packGridKey({x, y, z})].push_back(uint32_t(t));
         }
       }
     }
@@ -98,7 +94,7 @@ float MeshDistance::distance(const Eigen::Vector3f& p) const {
   for (int dz = -1; dz <= 1; ++dz) {
     for (int dy = -1; dy <= 1; ++dy) {
       for (int dx = -1; dx <= 1; ++dx) {
-        const auto it = cells_.find(key(c + Eigen::Vector3i(dx, dy, dz)));
+        const auto it = cells_.find(packGridKey(c + Eigen::Vector3i(dx, dy, dz)));
         if (it == cells_.end()) continue;
         for (uint32_t t : it->second) {
           const Eigen::Vector3i& tri = triangles_[t];

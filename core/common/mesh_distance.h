@@ -37,7 +37,6 @@ class MeshDistance {
 
  private:
   MeshDistance() = default;
-  static uint64_t key(const Eigen::Vector3i& cell);
   Eigen::Vector3i cellOf(const Eigen::Vector3f& p) const;
 
   float max_distance_ = 0.0f;

@@ -61,6 +61,15 @@ Status GsmParams::validate() const {
   return inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames");
 }
 
+Status ModelParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(positive(plane_distance_m, "model.plane_distance_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(planar_inlier_ratio, 0.0, 1.0, "model.planar_inlier_ratio"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(plane_ransac_iterations, 1, 1000000, "model.plane_ransac_iterations"));
+  OBJDB_RETURN_IF_ERROR(inRange(min_points, 1, 1 << 30, "model.min_points"));
+  return inRange(cloud_spacing_m, 0.0005, 1.0, "model.cloud_spacing_m");
+}
+
 Status KeypointParams::validate() const {
   OBJDB_RETURN_IF_ERROR(positive(harris_radius_m, "keypoints.harris_radius_m"));
   OBJDB_RETURN_IF_ERROR(inRange(harris_min_neighbors, 1, 10000, "keypoints.harris_min_neighbors"));
@@ -81,7 +90,14 @@ Status DescriptorParams::validate() const {
 Status MatchingParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(similarity_threshold, 0.0, 1.0, "matching.similarity_threshold"));
   OBJDB_RETURN_IF_ERROR(inRange(k_nn, 1, 100, "matching.k_nn"));
-  return positive(icp_max_rmse_m, "matching.icp_max_rmse_m");
+  OBJDB_RETURN_IF_ERROR(positive(icp_max_rmse_m, "matching.icp_max_rmse_m"));
+  OBJDB_RETURN_IF_ERROR(
+      positive(ransac_inlier_distance_m, "matching.ransac_inlier_distance_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(ransac_iterations, 1, 10000000, "matching.ransac_iterations"));
+  OBJDB_RETURN_IF_ERROR(inRange(ransac_min_inliers, 3, 100000, "matching.ransac_min_inliers"));
+  OBJDB_RETURN_IF_ERROR(
+      positive(icp_max_correspondence_m, "matching.icp_max_correspondence_m"));
+  return inRange(icp_iterations, 1, 10000, "matching.icp_iterations");
 }
 
 double MergingParams::minOverlapVoxels(double voxel_size_m) const {
@@ -100,6 +116,7 @@ Status Params::validate() const {
   OBJDB_RETURN_IF_ERROR(segmentation.validate());
   OBJDB_RETURN_IF_ERROR(tsdf.validate());
   OBJDB_RETURN_IF_ERROR(gsm.validate());
+  OBJDB_RETURN_IF_ERROR(model.validate());
   OBJDB_RETURN_IF_ERROR(keypoints.validate());
   OBJDB_RETURN_IF_ERROR(descriptors.validate());
   OBJDB_RETURN_IF_ERROR(matching.validate());

@@ -51,6 +51,23 @@ struct GsmParams {
   Status validate() const;
 };
 
+// §III-C.1 object models: surface cloud and planarity test (ours; the paper gives no values).
+struct ModelParams {
+  // A segment is planar (stored, never matched) when at least planar_inlier_ratio of its surface
+  // points lie within plane_distance_m of one RANSAC plane.
+  float plane_distance_m = 0.01f;
+  float planar_inlier_ratio = 0.9f;
+  int plane_ransac_iterations = 200;
+  // Fewer surface points than this: too small to describe, stored but never matched.
+  int min_points = 100;
+  // The surface cloud is resampled to one point (mean position and normal) per cube of this
+  // side: marching tetrahedra gives several vertices per voxel, and keypoint and FPFH costs grow
+  // with the number of points inside their radii. Metric, so table I's radii mean the same at
+  // every voxel size.
+  float cloud_spacing_m = 0.01f;
+  Status validate() const;
+};
+
 // §III-C.2 keypoints (table I).
 struct KeypointParams {
   float harris_radius_m = 0.03f;         // r_H
@@ -75,6 +92,12 @@ struct MatchingParams {
   float similarity_threshold = 0.4f;  // t_sim
   int k_nn = 5;                       // k_NN best descriptor matches per keypoint
   float icp_max_rmse_m = 0.02f;       // e*_ICP
+  // Ours (not in table I): RANSAC over the descriptor matches, then point-to-plane ICP.
+  float ransac_inlier_distance_m = 0.03f;  // a match agrees with a transform within this
+  int ransac_iterations = 2000;
+  int ransac_min_inliers = 6;              // fewer: no consistent set, candidate rejected
+  float icp_max_correspondence_m = 0.05f;  // ICP pairs farther apart are ignored
+  int icp_iterations = 30;
   Status validate() const;
 };
 
@@ -95,6 +118,7 @@ struct Params {
   SegmentationParams segmentation;
   TsdfParams tsdf;
   GsmParams gsm;
+  ModelParams model;
   KeypointParams keypoints;
   DescriptorParams descriptors;
   MatchingParams matching;

@@ -45,6 +45,14 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("extraction_age_frames", p.extraction_age_frames);
 }
 template <typename Fn>
+void forEachField(ModelParams& p, Fn&& fn) {
+  fn("plane_distance_m", p.plane_distance_m);
+  fn("planar_inlier_ratio", p.planar_inlier_ratio);
+  fn("plane_ransac_iterations", p.plane_ransac_iterations);
+  fn("min_points", p.min_points);
+  fn("cloud_spacing_m", p.cloud_spacing_m);
+}
+template <typename Fn>
 void forEachField(KeypointParams& p, Fn&& fn) {
   fn("harris_radius_m", p.harris_radius_m);
   fn("harris_min_neighbors", p.harris_min_neighbors);
@@ -64,6 +72,11 @@ void forEachField(MatchingParams& p, Fn&& fn) {
   fn("similarity_threshold", p.similarity_threshold);
   fn("k_nn", p.k_nn);
   fn("icp_max_rmse_m", p.icp_max_rmse_m);
+  fn("ransac_inlier_distance_m", p.ransac_inlier_distance_m);
+  fn("ransac_iterations", p.ransac_iterations);
+  fn("ransac_min_inliers", p.ransac_min_inliers);
+  fn("icp_max_correspondence_m", p.icp_max_correspondence_m);
+  fn("icp_iterations", p.icp_iterations);
 }
 template <typename Fn>
 void forEachField(MergingParams& p, Fn&& fn) {
@@ -76,6 +89,7 @@ void forEachSection(Params& p, Fn&& fn) {
   fn("segmentation", p.segmentation);
   fn("tsdf", p.tsdf);
   fn("gsm", p.gsm);
+  fn("model", p.model);
   fn("keypoints", p.keypoints);
   fn("descriptors", p.descriptors);
   fn("matching", p.matching);
@@ -153,7 +167,7 @@ Status applyParamsJson(absl::string_view text, Params* params) {
   for (const auto& [key, value] : root.items()) {
     Status status = absl::InvalidArgumentError(absl::StrCat(
         "unknown config section '", key,
-        "' (known: segmentation, tsdf, gsm, keypoints, descriptors, matching, merging)"));
+        "' (known: segmentation, tsdf, gsm, model, keypoints, descriptors, matching, merging)"));
     forEachSection(updated, [&](const char* name, auto& section) {
       if (key == name) status = applySection(value, key, &section);
     });

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "absl/container/flat_hash_set.h"
+#include "core/common/grid_key.h"
 
 namespace objdb::tsdf {
 namespace {
@@ -29,10 +30,7 @@ struct EdgeKey {
 struct EdgeKeyHash {
   size_t operator()(const EdgeKey& k) const { return size_t(k.a * 0x9e3779b97f4a7c15ULL ^ k.b); }
 };
-uint64_t pack(const VoxelIndex& v) {
-  auto f = [](int c) { return uint64_t(uint32_t(c + (1 << 20)) & 0x1fffff); };
-  return f(v.x()) | (f(v.y()) << 21) | (f(v.z()) << 42);
-}
+uint64_t pack(const VoxelIndex& v) { return packGridKey(v); }
 EdgeKey edgeKey(const VoxelIndex& p, const VoxelIndex& q) {
   const uint64_t a = pack(p), b = pack(q);
   return a < b ? EdgeKey{a, b} : EdgeKey{b, a};

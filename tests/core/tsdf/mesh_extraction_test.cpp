@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/support/sdf_grid.h"
+
 #include "core/common/params.h"
 #include "core/sim/renderer.h"
 #include "core/sim/shapes.h"
@@ -13,26 +15,12 @@
 namespace objdb::tsdf {
 namespace {
 
-// Fills every voxel within `band` of a sphere with its exact truncated signed distance.
+// Every voxel within 3 voxels of a sphere, with its exact signed distance.
 TsdfLayer analyticSphere(float voxel, float radius, const Eigen::Vector3f& centre) {
-  TsdfLayer layer = TsdfLayer::create(voxel, 8).value();
-  const float band = 3 * voxel;
-  const int reach = int(std::ceil((radius + band) / voxel)) + 1;
-  const VoxelIndex c = layer.voxelIndexOf(centre);
-  for (int z = -reach; z <= reach; ++z) {
-    for (int y = -reach; y <= reach; ++y) {
-      for (int x = -reach; x <= reach; ++x) {
-        const VoxelIndex v = c + Eigen::Vector3i(x, y, z);
-        const float d = (layer.voxelCenter(v) - centre).norm() - radius;
-        if (std::abs(d) > band) continue;
-        layer.allocateBlock(layer.blockOfVoxel(v));
-        TsdfVoxel* voxel_ptr = layer.voxel(v);
-        voxel_ptr->distance = d;
-        voxel_ptr->weight = 10.0f;
-      }
-    }
-  }
-  return layer;
+  const Eigen::Vector3f reach = Eigen::Vector3f::Constant(radius + 4 * voxel);
+  return objdb::testing::sdfGrid(objdb::testing::sphereSdf(centre, radius), centre - reach,
+                                 centre + reach, voxel, 3 * voxel)
+      .layer;
 }
 
 std::map<std::pair<int, int>, int> edgeUse(const TriangleMesh& mesh) {

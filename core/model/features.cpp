@@ -1,0 +1,165 @@
+// The only translation unit of core/model that includes PCL (compile cost: see DESIGN.md).
+#include "core/model/features.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <pcl/features/fpfh.h>
+#include <pcl/keypoints/harris_3d.h>
+#include <pcl/keypoints/iss_3d.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+#include <pcl/sample_consensus/ransac.h>
+#include <pcl/sample_consensus/sac_model_plane.h>
+#include <pcl/search/kdtree.h>
+
+namespace objdb::model {
+namespace {
+
+pcl::PointCloud<pcl::PointXYZ>::Ptr toPcl(const PointCloud& cloud) {
+  auto out = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  out->reserve(cloud.points.size());
+  for (const auto& p : cloud.points) out->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+  return out;
+}
+
+pcl::PointCloud<pcl::Normal>::Ptr toPclNormals(const PointCloud& cloud) {
+  auto out = std::make_shared<pcl::PointCloud<pcl::Normal>>();
+  out->reserve(cloud.normals.size());
+  for (const auto& n : cloud.normals) out->push_back(pcl::Normal(n.x(), n.y(), n.z()));
+  return out;
+}
+
+// Surface variation λ0 / (λ0 + λ1 + λ2) of a neighbourhood (0 on a plane, 1/3 isotropic).
+float surfaceVariation(const pcl::PointCloud<pcl::PointXYZ>& cloud,
+                       const std::vector<int>& neighbours) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int i : neighbours) mean += cloud[size_t(i)].getVector3fMap().cast<double>();
+  mean /= double(neighbours.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (int i : neighbours) {
+    const Eigen::Vector3d d = cloud[size_t(i)].getVector3fMap().cast<double>() - mean;
+    cov += d * d.transpose();
+  }
+  const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvalues();
+  const double sum = ev.sum();
+  return sum > 0.0 ? float(ev(0) / sum) : 0.0f;
+}
+
+}  // namespace
+
+PlaneFit fitPlane(const PointCloud& cloud, float distance_m, int iterations) {
+  PlaneFit fit;
+  if (cloud.points.size() < 3) return fit;
+  const auto points = toPcl(cloud);
+  // random = false: PCL seeds its generator with a constant, so the fit is deterministic.
+  auto plane = std::make_shared<pcl::SampleConsensusModelPlane<pcl::PointXYZ>>(points, false);
+  pcl::RandomSampleConsensus<pcl::PointXYZ> ransac(plane, double(distance_m));
+  ransac.setMaxIterations(iterations);
+  if (!ransac.computeModel()) return fit;
+  Eigen::VectorXf coefficients;
+  ransac.getModelCoefficients(coefficients);
+  if (coefficients.size() != 4) return fit;
+  fit.coefficients = coefficients.head<4>();
+  const float norm = fit.coefficients.head<3>().norm();
+  if (norm > 0.0f) fit.coefficients /= norm;
+  // RANSAC's consensus was counted on its best sample; count on the refined plane too.
+  std::vector<int> inliers;
+  plane->selectWithinDistance(coefficients, double(distance_m), inliers);
+  fit.inlier_ratio = float(inliers.size()) / float(cloud.points.size());
+  return fit;
+}
+
+std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointParams& params,
+                                      KeypointCounts* counts) {
+  std::vector<uint32_t> result;
+  if (cloud.points.size() < 3 || cloud.normals.size() != cloud.points.size()) return result;
+  const auto points = toPcl(cloud);
+  const auto normals = toPclNormals(cloud);
+  auto tree = std::make_shared<pcl::search::KdTree<pcl::PointXYZ>>();
+  tree->setInputCloud(points);
+
+  // ISS: many keypoints, also in smooth areas (paper §III-C.2).
+  pcl::ISSKeypoint3D<pcl::PointXYZ, pcl::PointXYZ, pcl::Normal> iss;
+  iss.setInputCloud(points);
+  iss.setSearchMethod(tree);
+  iss.setSalientRadius(params.iss_salient_radius_m);
+  iss.setNonMaxRadius(params.iss_non_max_radius_m);
+  iss.setBorderRadius(params.iss_border_radius_m);
+  iss.setNormals(normals);
+  iss.setMinNeighbors(params.iss_min_neighbors);
+  iss.setNumberOfThreads(1);
+  pcl::PointCloud<pcl::PointXYZ> iss_points;
+  iss.compute(iss_points);
+  std::vector<uint32_t> from_iss;
+  for (int i : iss.getKeypointsIndices()->indices) from_iss.push_back(uint32_t(i));
+
+  // Harris3D: fewer, more repeatable keypoints; then the k_min and t_curv filters of table I.
+  pcl::HarrisKeypoint3D<pcl::PointXYZ, pcl::PointXYZI, pcl::Normal> harris;
+  harris.setInputCloud(points);
+  harris.setSearchMethod(tree);
+  harris.setNormals(normals);
+  harris.setRadius(params.harris_radius_m);
+  harris.setThreshold(params.harris_response_threshold);
+  harris.setNonMaxSupression(true);
+  harris.setRefine(false);  // keypoints stay cloud points (indices)
+  harris.setNumberOfThreads(1);
+  pcl::PointCloud<pcl::PointXYZI> harris_points;
+  harris.compute(harris_points);
+  std::vector<uint32_t> from_harris;
+  std::vector<int> neighbours;
+  std::vector<float> distances;
+  for (int i : harris.getKeypointsIndices()->indices) {
+    const int n = tree->radiusSearch((*points)[size_t(i)], params.harris_radius_m, neighbours,
+                                     distances);
+    if (n < params.harris_min_neighbors) continue;
+    if (surfaceVariation(*points, neighbours) < params.harris_curvature_threshold) continue;
+    from_harris.push_back(uint32_t(i));
+  }
+
+  std::sort(from_iss.begin(), from_iss.end());
+  std::sort(from_harris.begin(), from_harris.end());
+  std::set_union(from_iss.begin(), from_iss.end(), from_harris.begin(), from_harris.end(),
+                 std::back_inserter(result));
+  result.erase(std::unique(result.begin(), result.end()), result.end());
+  if (counts) {
+    counts->iss = from_iss.size();
+    counts->harris = from_harris.size();
+    counts->both = from_iss.size() + from_harris.size() - result.size();
+  }
+  return result;
+}
+
+std::vector<Fpfh> computeFpfh(const PointCloud& cloud, std::vector<uint32_t>* indices,
+                              const DescriptorParams& params) {
+  std::vector<Fpfh> result;
+  if (indices->empty() || cloud.normals.size() != cloud.points.size()) {
+    indices->clear();
+    return result;
+  }
+  const auto points = toPcl(cloud);
+  const auto normals = toPclNormals(cloud);
+  auto keypoints = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  for (uint32_t i : *indices) keypoints->push_back((*points)[i]);
+  pcl::FPFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fpfh;
+  fpfh.setSearchSurface(points);
+  fpfh.setInputNormals(normals);
+  fpfh.setInputCloud(keypoints);
+  fpfh.setSearchMethod(std::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+  fpfh.setRadiusSearch(params.fpfh_radius_m);
+  pcl::PointCloud<pcl::FPFHSignature33> descriptors;
+  fpfh.compute(descriptors);
+  std::vector<uint32_t> kept;
+  for (size_t k = 0; k < descriptors.size(); ++k) {
+    const float* h = descriptors[k].histogram;
+    if (!std::all_of(h, h + 33, [](float v) { return std::isfinite(v); })) continue;
+    Fpfh d;
+    std::copy(h, h + 33, d.begin());
+    result.push_back(d);
+    kept.push_back((*indices)[k]);
+  }
+  *indices = std::move(kept);
+  return result;
+}
+
+}  // namespace objdb::model

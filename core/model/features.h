@@ -1,0 +1,35 @@
+// PCL-backed geometry of object models: planarity (RANSAC plane), keypoints (ISS ∪ Harris3D) and
+// FPFH descriptors. PCL stays inside features.cpp: nothing here includes it.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "core/common/mesh.h"
+#include "core/common/params.h"
+#include "core/model/object_model.h"
+
+namespace objdb::model {
+
+struct PlaneFit {
+  Eigen::Vector4f coefficients = Eigen::Vector4f::Zero();  // n·p + d = 0, |n| = 1
+  float inlier_ratio = 0.0f;
+};
+// Best plane by RANSAC (deterministic seed). Fewer than 3 points: inlier_ratio 0.
+PlaneFit fitPlane(const PointCloud& cloud, float distance_m, int iterations);
+
+struct KeypointCounts {
+  size_t iss = 0, harris = 0, both = 0;
+};
+// ISS (r_s, r_nm, r_b, k_min of table I) ∪ Harris3D (r_H, t_resp; then k_min neighbours within
+// r_H and surface variation λ0/(λ0+λ1+λ2) ≥ t_curv, which PCL's detector does not apply) as
+// indices into the cloud, ascending. The cloud needs normals.
+std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointParams& params,
+                                      KeypointCounts* counts = nullptr);
+
+// FPFH (radius r) at the given cloud points, over the whole cloud as search surface. Keypoints
+// whose descriptor is undefined (too few neighbours) are dropped from `indices`.
+std::vector<Fpfh> computeFpfh(const PointCloud& cloud, std::vector<uint32_t>* indices,
+                              const DescriptorParams& params);
+
+}  // namespace objdb::model

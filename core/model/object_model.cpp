@@ -1,0 +1,151 @@
+#include "core/model/object_model.h"
+
+#include <chrono>
+#include <cmath>
+
+#include "absl/container/flat_hash_set.h"
+#include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
+#include "core/model/features.h"
+#include "core/tsdf/mesh_extraction.h"
+
+namespace objdb::model {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+}  // namespace
+
+bool ObjectModel::matchable(const ModelParams& params) const {
+  return !planar && cloud.points.size() >= size_t(params.min_points) &&
+         keypoint_indices.size() >= 3 && descriptors.size() == keypoint_indices.size();
+}
+
+StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
+                                  const std::vector<tsdf::VoxelIndex>& voxels, float min_weight) {
+  if (voxels.empty()) return absl::InvalidArgumentError("surface cloud: the segment has no voxels");
+  absl::flat_hash_set<uint64_t> inside;
+  absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;
+  inside.reserve(voxels.size());
+  for (const auto& v : voxels) {
+    inside.insert(packGridKey(v));
+    // Cells whose lowest corner is one voxel below also touch v: mesh those blocks too.
+    for (int dz = -1; dz <= 0; ++dz) {
+      for (int dy = -1; dy <= 0; ++dy) {
+        for (int dx = -1; dx <= 0; ++dx) {
+          const tsdf::BlockIndex b = grid.blockOfVoxel(v + Eigen::Vector3i(dx, dy, dz));
+          if (grid.block(b) != nullptr) blocks.insert(b);
+        }
+      }
+    }
+  }
+  TriangleMesh mesh;
+  std::vector<tsdf::BlockIndex> ordered(blocks.begin(), blocks.end());
+  std::sort(ordered.begin(), ordered.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+  });
+  for (const auto& b : ordered) mesh.append(tsdf::meshBlock(grid, b, min_weight));
+  // Area-weighted normals need shared vertices: weld the vertices blocks have in common.
+  TriangleMesh welded;
+  absl::flat_hash_map<std::array<float, 3>, int, absl::Hash<std::array<float, 3>>> seen;
+  std::vector<int> remap(mesh.vertices.size());
+  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
+    const Eigen::Vector3f& v = mesh.vertices[i];
+    const auto [it, inserted] =
+        seen.emplace(std::array<float, 3>{v.x(), v.y(), v.z()}, int(welded.vertices.size()));
+    if (inserted) welded.vertices.push_back(v);
+    remap[i] = it->second;
+  }
+  for (const auto& t : mesh.triangles) {
+    welded.triangles.emplace_back(remap[size_t(t[0])], remap[size_t(t[1])], remap[size_t(t[2])]);
+  }
+  welded.computeVertexNormals();
+  // Keep the vertices on a cell touching one of the segment's voxels.
+  PointCloud cloud;
+  const float inv = 1.0f / grid.voxelSize();
+  for (size_t i = 0; i < welded.vertices.size(); ++i) {
+    const Eigen::Vector3f& p = welded.vertices[i];
+    const Eigen::Vector3i lower = (p * inv - Eigen::Vector3f::Constant(0.5f)).array().floor().cast<int>();
+    bool keep = false;
+    for (int c = 0; c < 8 && !keep; ++c) {
+      keep = inside.contains(packGridKey(lower + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1)));
+    }
+    if (!keep) continue;
+    const Eigen::Vector3f& n = welded.normals[i];
+    if (!(n.squaredNorm() > 0.5f)) continue;  // isolated vertex without a usable normal
+    cloud.points.push_back(p);
+    cloud.normals.push_back(n);
+  }
+  return cloud;
+}
+
+PointCloud resampleCloud(const PointCloud& cloud, float spacing) {
+  struct Cell {
+    Eigen::Vector3d point = Eigen::Vector3d::Zero();
+    Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    int count = 0;
+  };
+  absl::flat_hash_map<uint64_t, Cell> cells;
+  const float inv = 1.0f / spacing;
+  const bool with_normals = cloud.normals.size() == cloud.points.size();
+  for (size_t i = 0; i < cloud.points.size(); ++i) {
+    const Eigen::Vector3i c = (cloud.points[i] * inv).array().floor().cast<int>();
+    Cell& cell = cells[packGridKey(c)];
+    cell.point += cloud.points[i].cast<double>();
+    if (with_normals) cell.normal += cloud.normals[i].cast<double>();
+    ++cell.count;
+  }
+  std::vector<std::pair<uint64_t, const Cell*>> ordered;
+  ordered.reserve(cells.size());
+  for (const auto& [key, cell] : cells) ordered.emplace_back(key, &cell);
+  std::sort(ordered.begin(), ordered.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  PointCloud out;
+  for (const auto& [key, cell] : ordered) {
+    if (with_normals) {
+      const double norm = cell->normal.norm();
+      if (!(norm > 1e-6 * cell->count)) continue;
+      out.normals.push_back((cell->normal / norm).cast<float>());
+    }
+    out.points.push_back((cell->point / double(cell->count)).cast<float>());
+  }
+  return out;
+}
+
+StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::VoxelIndex>& voxels,
+                                 const ModelBuildParams& params) {
+  OBJDB_RETURN_IF_ERROR(params.model.validate());
+  OBJDB_RETURN_IF_ERROR(params.keypoints.validate());
+  OBJDB_RETURN_IF_ERROR(params.descriptors.validate());
+  ObjectModel model(std::move(grid));
+  auto t = Clock::now();
+  OBJDB_ASSIGN_OR_RETURN(PointCloud surface,
+                         surfaceCloud(model.grid, voxels, params.mesh_min_weight));
+  model.cloud = resampleCloud(surface, params.model.cloud_spacing_m);
+  model.timings.cloud_ms = msSince(t);
+  if (model.cloud.points.empty()) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "object model: the segment's %d voxels hold no surface (no zero crossing with weight >= "
+        "%g)",
+        voxels.size(), params.mesh_min_weight));
+  }
+  t = Clock::now();
+  const PlaneFit plane =
+      fitPlane(model.cloud, params.model.plane_distance_m, params.model.plane_ransac_iterations);
+  model.plane_inlier_ratio = plane.inlier_ratio;
+  model.planar = plane.inlier_ratio >= params.model.planar_inlier_ratio;
+  model.timings.planarity_ms = msSince(t);
+  if (model.planar || model.cloud.points.size() < size_t(params.model.min_points)) return model;
+  t = Clock::now();
+  model.keypoint_indices = detectKeypoints(model.cloud, params.keypoints);
+  model.timings.keypoints_ms = msSince(t);
+  t = Clock::now();
+  model.descriptors = computeFpfh(model.cloud, &model.keypoint_indices, params.descriptors);
+  model.timings.descriptors_ms = msSince(t);
+  return model;
+}
+
+}  // namespace objdb::model

@@ -1,0 +1,82 @@
+// Object models (paper §III-C.1–2): what the database stores per object. A model is built from a
+// raw segment's TSDF grid: the zero level set inside the segment's voxels becomes a surface
+// cloud with normals; a RANSAC plane test flags planar segments (stored, never matched); the
+// rest get ISS + Harris3D keypoints and FPFH descriptors for matching.
+//
+// Frames: the grid, cloud and keypoints live in the model's own frame; poses[0] is where that
+// frame sits in the world of the session that first saw it (T_world_object); merging adds the
+// poses of the other observations.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "core/common/mesh.h"
+#include "core/common/params.h"
+#include "core/common/status.h"
+#include "core/common/transform.h"
+#include "core/tsdf/tsdf_layer.h"
+
+namespace objdb::model {
+
+using Fpfh = std::array<float, 33>;
+
+// One observation of the object: where the model frame was in a session's world.
+struct ModelPose {
+  std::string session;
+  int64_t raw_segment = 0;  // id of the raw segment it came from (0 = unknown)
+  Transform T_world_object = Transform::Identity();
+};
+
+// Time spent building a model, ms (paper table II: P, K, D).
+struct BuildTimings {
+  double cloud_ms = 0, planarity_ms = 0, keypoints_ms = 0, descriptors_ms = 0;
+};
+
+struct ObjectModel {
+  explicit ObjectModel(tsdf::TsdfLayer model_grid) : grid(std::move(model_grid)) {}
+
+  int64_t id = 0;
+  std::vector<ModelPose> poses;            // 𝕋: first = base frame
+  tsdf::TsdfLayer grid;                    // model frame
+  PointCloud cloud;                        // surface points + unit normals (outward), model frame
+  std::vector<uint32_t> keypoint_indices;  // into cloud.points (ISS ∪ Harris3D)
+  std::vector<Fpfh> descriptors;           // one per keypoint
+  bool planar = false;                     // planar segments are stored, never matched
+  float plane_inlier_ratio = 0.0f;         // share of points on the best plane
+  std::vector<int64_t> raw_segments;       // lineage: raw segments fused into this model
+  std::vector<int64_t> merged_from;        // lineage: models merged into this one
+  BuildTimings timings;
+
+  // Matchable: not planar, enough points, at least 3 described keypoints.
+  bool matchable(const ModelParams& params) const;
+  Eigen::Vector3f keypoint(size_t k) const { return cloud.points[keypoint_indices[k]]; }
+};
+
+// Marching-tetrahedra surface of `grid` restricted to `voxels` (vertices whose cell touches one
+// of them), with area-weighted normals pointing out of the object (toward positive distance).
+// Cells with a corner lighter than min_weight are skipped. Errors: no voxels given.
+StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
+                                  const std::vector<tsdf::VoxelIndex>& voxels, float min_weight);
+
+// One point per cube of side `spacing`: the mean of the points in it, with their mean normal
+// (renormalised; cubes whose normals cancel out are dropped). Deterministic order.
+PointCloud resampleCloud(const PointCloud& cloud, float spacing);
+
+struct ModelBuildParams {
+  ModelParams model;
+  KeypointParams keypoints;
+  DescriptorParams descriptors;
+  float mesh_min_weight = 3.0f;  // tsdf.mesh_min_weight
+};
+
+// Builds a model from a segment's grid and the voxels carrying its label (same frame; the grid
+// becomes the model's). Errors: no voxels, an empty surface, invalid params.
+StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::VoxelIndex>& voxels,
+                                 const ModelBuildParams& params);
+
+}  // namespace objdb::model

@@ -1,0 +1,183 @@
+#include "core/model/object_model.h"
+
+#include <cmath>
+#include <numeric>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "core/model/features.h"
+#include "tests/support/sdf_grid.h"
+
+namespace objdb::model {
+namespace {
+
+using objdb::testing::boxSdf;
+using objdb::testing::sdfGrid;
+using objdb::testing::sphereSdf;
+using objdb::testing::unionSdf;
+using ::testing::HasSubstr;
+
+constexpr float kVoxel = 0.01f;
+
+ModelBuildParams defaults() { return ModelBuildParams{}; }
+
+TEST(SurfaceCloud, SphereSurfaceWithOutwardNormals) {
+  const Eigen::Vector3f centre(0.1f, -0.2f, 0.3f);
+  const float radius = 0.15f;
+  const Eigen::Vector3f reach = Eigen::Vector3f::Constant(radius + 0.05f);
+  auto grid = sdfGrid(sphereSdf(centre, radius), centre - reach, centre + reach, kVoxel,
+                      3 * kVoxel);
+  auto cloud = surfaceCloud(grid.layer, grid.surface_voxels, 3.0f);
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  ASSERT_GT(cloud->points.size(), 1000u);
+  ASSERT_EQ(cloud->normals.size(), cloud->points.size());
+  double worst_radius = 0, worst_angle = 0;
+  for (size_t i = 0; i < cloud->points.size(); ++i) {
+    const Eigen::Vector3f r = cloud->points[i] - centre;
+    worst_radius = std::max(worst_radius, double(std::abs(r.norm() - radius)));
+    const double cosine = double(cloud->normals[i].dot(r.normalized()));
+    worst_angle = std::max(worst_angle, std::acos(std::clamp(cosine, -1.0, 1.0)) * 180 / M_PI);
+  }
+  EXPECT_LT(worst_radius, 0.002);  // vertices on the sphere within 2 mm at 1 cm voxels
+  EXPECT_LT(worst_angle, 10.0);    // and normals point outward
+}
+
+TEST(SurfaceCloud, KeepsOnlyTheSegmentsVoxels) {
+  // Two spheres in one grid; the segment is the first one's voxels only.
+  const Eigen::Vector3f a(0, 0, 0), b(0.5f, 0, 0);
+  auto both = sdfGrid(unionSdf({sphereSdf(a, 0.1f), sphereSdf(b, 0.1f)}),
+                      Eigen::Vector3f(-0.2f, -0.2f, -0.2f), Eigen::Vector3f(0.7f, 0.2f, 0.2f),
+                      kVoxel, 3 * kVoxel);
+  std::vector<tsdf::VoxelIndex> first;
+  for (const auto& v : both.surface_voxels) {
+    if (both.layer.voxelCenter(v).x() < 0.25f) first.push_back(v);
+  }
+  auto cloud = surfaceCloud(both.layer, first, 3.0f);
+  ASSERT_TRUE(cloud.ok());
+  ASSERT_FALSE(cloud->points.empty());
+  for (const auto& p : cloud->points) ASSERT_LT((p - a).norm(), 0.12f);
+}
+
+TEST(SurfaceCloud, RejectsAnEmptySegment) {
+  auto grid = sdfGrid(sphereSdf({0, 0, 0}, 0.1f), Eigen::Vector3f::Constant(-0.2f),
+                      Eigen::Vector3f::Constant(0.2f), kVoxel, 3 * kVoxel);
+  EXPECT_THAT(std::string(surfaceCloud(grid.layer, {}, 3.0f).status().message()),
+              HasSubstr("no voxels"));
+}
+
+TEST(BuildModel, APlanarSegmentIsFlaggedAndNotDescribed) {
+  // A 40 × 40 cm slab face: the segment is the voxels near its top face.
+  auto grid = sdfGrid(boxSdf({0, 0, 0}, {0.2f, 0.2f, 0.05f}), Eigen::Vector3f(-0.3f, -0.3f, -0.1f),
+                      Eigen::Vector3f(0.3f, 0.3f, 0.1f), kVoxel, 3 * kVoxel);
+  std::vector<tsdf::VoxelIndex> top;
+  for (const auto& v : grid.surface_voxels) {
+    const Eigen::Vector3f c = grid.layer.voxelCenter(v);
+    if (c.z() > 0.03f && std::abs(c.x()) < 0.17f && std::abs(c.y()) < 0.17f) top.push_back(v);
+  }
+  auto model = buildModel(std::move(grid.layer), top, defaults());
+  ASSERT_TRUE(model.ok()) << model.status();
+  EXPECT_TRUE(model->planar);
+  EXPECT_GT(model->plane_inlier_ratio, 0.95f);
+  EXPECT_TRUE(model->keypoint_indices.empty());
+  EXPECT_TRUE(model->descriptors.empty());
+  EXPECT_FALSE(model->matchable(ModelParams{}));
+}
+
+TEST(BuildModel, ABoxGetsKeypointsAtItsCornersAndDescriptors) {
+  auto grid = sdfGrid(boxSdf({0, 0, 0}, {0.2f, 0.15f, 0.1f}), Eigen::Vector3f::Constant(-0.3f),
+                      Eigen::Vector3f::Constant(0.3f), kVoxel, 3 * kVoxel);
+  auto model = buildModel(std::move(grid.layer), grid.surface_voxels, defaults());
+  ASSERT_TRUE(model.ok()) << model.status();
+  EXPECT_FALSE(model->planar);
+  EXPECT_LT(model->plane_inlier_ratio, 0.5f);
+  ASSERT_TRUE(model->matchable(ModelParams{}));
+  ASSERT_EQ(model->descriptors.size(), model->keypoint_indices.size());
+  EXPECT_GE(model->keypoint_indices.size(), 8u);
+  // Some keypoint sits near each of the 8 corners (within 5 cm).
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3f corner((c & 1) ? 0.2f : -0.2f, (c & 2) ? 0.15f : -0.15f,
+                                 (c & 4) ? 0.1f : -0.1f);
+    float nearest = INFINITY;
+    for (size_t k = 0; k < model->keypoint_indices.size(); ++k) {
+      nearest = std::min(nearest, (model->keypoint(k) - corner).norm());
+    }
+    EXPECT_LT(nearest, 0.05f) << "corner " << corner.transpose();
+  }
+  // FPFH: three 11-bin sub-histograms, each normalised to 100.
+  for (const Fpfh& d : model->descriptors) {
+    const float sum = std::accumulate(d.begin(), d.end(), 0.0f);
+    ASSERT_NEAR(sum, 300.0f, 1.0f);
+  }
+  EXPECT_GT(model->timings.descriptors_ms, 0.0);
+}
+
+TEST(BuildModel, IsDeterministic) {
+  auto make = [] {
+    auto grid = sdfGrid(unionSdf({boxSdf({0, 0, 0}, {0.15f, 0.1f, 0.1f}),
+                                  sphereSdf({0.15f, 0.1f, 0.1f}, 0.08f)}),
+                        Eigen::Vector3f::Constant(-0.3f), Eigen::Vector3f::Constant(0.35f), kVoxel,
+                        3 * kVoxel);
+    return buildModel(std::move(grid.layer), grid.surface_voxels, defaults()).value();
+  };
+  const ObjectModel a = make(), b = make();
+  EXPECT_EQ(a.keypoint_indices, b.keypoint_indices);
+  EXPECT_EQ(a.descriptors, b.descriptors);
+  EXPECT_EQ(a.cloud.points, b.cloud.points);
+}
+
+TEST(BuildModel, BadInputIsAClearError) {
+  auto grid = sdfGrid(sphereSdf({0, 0, 0}, 0.1f), Eigen::Vector3f::Constant(-0.2f),
+                      Eigen::Vector3f::Constant(0.2f), kVoxel, 3 * kVoxel);
+  ModelBuildParams bad = defaults();
+  bad.descriptors.fpfh_radius_m = -1.0f;
+  EXPECT_THAT(std::string(buildModel(std::move(grid.layer), grid.surface_voxels, bad)
+                              .status()
+                              .message()),
+              HasSubstr("descriptors.fpfh_radius_m"));
+  // Voxels that hold no zero crossing: all far outside the sphere.
+  auto far = sdfGrid(sphereSdf({0, 0, 0}, 0.1f), Eigen::Vector3f::Constant(-0.2f),
+                     Eigen::Vector3f::Constant(0.2f), kVoxel, 3 * kVoxel);
+  const auto status =
+      buildModel(std::move(far.layer), {tsdf::VoxelIndex(30, 30, 30)}, defaults()).status();
+  EXPECT_EQ(status.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(std::string(status.message()), HasSubstr("hold no surface"));
+}
+
+TEST(ResampleCloud, OnePointPerCubeWithMeanPositionAndNormal) {
+  PointCloud cloud;
+  cloud.points = {{0.001f, 0.001f, 0.001f}, {0.003f, 0.005f, 0.007f}, {0.015f, 0.0f, 0.0f}};
+  cloud.normals = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const PointCloud out = resampleCloud(cloud, 0.01f);
+  ASSERT_EQ(out.points.size(), 2u);
+  ASSERT_EQ(out.normals.size(), 2u);
+  // The first cube holds the first two points.
+  const size_t first = out.points[0].x() < 0.01f ? 0 : 1;
+  EXPECT_TRUE(out.points[first].isApprox(Eigen::Vector3f(0.002f, 0.003f, 0.004f), 1e-5f));
+  EXPECT_TRUE(out.normals[first].isApprox(Eigen::Vector3f(1, 1, 0).normalized(), 1e-5f));
+  EXPECT_TRUE(out.normals[1 - first].isApprox(Eigen::Vector3f(0, 0, 1)));
+  // Opposite normals cancel: that cube has no usable normal and is dropped.
+  PointCloud flat;
+  flat.points = {{0.001f, 0, 0}, {0.002f, 0, 0}};
+  flat.normals = {{0, 0, 1}, {0, 0, -1}};
+  EXPECT_TRUE(resampleCloud(flat, 0.01f).points.empty());
+}
+
+TEST(FitPlane, RecoversAKnownPlane) {
+  PointCloud cloud;
+  for (int i = 0; i < 30; ++i) {
+    for (int j = 0; j < 30; ++j) {
+      const float x = i * 0.01f, y = j * 0.01f;
+      cloud.points.emplace_back(x, y, 0.5f * x + 0.1f);  // z = 0.5 x + 0.1
+    }
+  }
+  cloud.points.emplace_back(0.1f, 0.1f, 2.0f);  // one outlier
+  const PlaneFit fit = fitPlane(cloud, 0.005f, 100);
+  const Eigen::Vector3f n = fit.coefficients.head<3>();
+  EXPECT_NEAR(std::abs(n.dot(Eigen::Vector3f(-0.5f, 0, 1).normalized())), 1.0f, 1e-4f);
+  EXPECT_NEAR(fit.inlier_ratio, 900.0f / 901.0f, 1e-6f);
+  EXPECT_EQ(fitPlane(PointCloud{}, 0.01f, 10).inlier_ratio, 0.0f);
+}
+
+}  // namespace
+}  // namespace objdb::model
