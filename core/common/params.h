@@ -94,7 +94,7 @@ struct MatchingParams {
   float icp_max_rmse_m = 0.02f;       // e*_ICP
   // Ours (not in table I): RANSAC over the descriptor matches, then point-to-plane ICP.
   float ransac_inlier_distance_m = 0.03f;  // a match agrees with a transform within this
-  int ransac_iterations = 2000;
+  int ransac_iterations = 10000;
   int ransac_min_inliers = 6;              // fewer: no consistent set, candidate rejected
   float icp_max_correspondence_m = 0.05f;  // ICP pairs farther apart are ignored
   int icp_iterations = 30;

@@ -63,12 +63,17 @@ TsdfVoxel* TsdfLayer::voxel(const VoxelIndex& v) {
 }
 
 bool TsdfLayer::interpolateDistance(const Eigen::Vector3f& p, float* distance) const {
+  float weight;
+  return interpolate(p, distance, &weight);
+}
+
+bool TsdfLayer::interpolate(const Eigen::Vector3f& p, float* distance, float* weight) const {
   // Voxel centres sit at (i + 0.5) · voxel_size: shift so the lower corner index is floor().
   const Eigen::Vector3f q = p * inv_voxel_size_ - Eigen::Vector3f::Constant(0.5f);
   const Eigen::Vector3f lower = q.array().floor();
   const Eigen::Vector3f f = q - lower;
   const VoxelIndex base = lower.cast<int>();
-  float result = 0.0f;
+  float d = 0.0f, w = 0.0f;
   for (int corner = 0; corner < 8; ++corner) {
     const Eigen::Vector3i offset(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
     const TsdfVoxel* v = voxel(base + offset);
@@ -76,10 +81,29 @@ bool TsdfLayer::interpolateDistance(const Eigen::Vector3f& p, float* distance) c
     const float wx = offset.x() ? f.x() : 1.0f - f.x();
     const float wy = offset.y() ? f.y() : 1.0f - f.y();
     const float wz = offset.z() ? f.z() : 1.0f - f.z();
-    result += wx * wy * wz * v->distance;
+    d += wx * wy * wz * v->distance;
+    w += wx * wy * wz * v->weight;
   }
-  *distance = result;
+  *distance = d;
+  *weight = w;
   return true;
+}
+
+TsdfLayer TsdfLayer::clone() const {
+  TsdfLayer copy(voxel_size_, vps_);
+  copy.blocks_.reserve(blocks_.size());
+  for (const auto& [index, block] : blocks_) {
+    copy.blocks_.emplace(index, std::make_unique<TsdfBlock>(*block));
+  }
+  return copy;
+}
+
+size_t TsdfLayer::numObservedVoxels() const {
+  size_t n = 0;
+  for (const auto& [index, block] : blocks_) {
+    for (const TsdfVoxel& v : block->voxels()) n += v.weight > 0.0f ? 1 : 0;
+  }
+  return n;
 }
 
 }  // namespace objdb::tsdf

@@ -78,6 +78,13 @@ class TsdfLayer {
   // Trilinear interpolation of the distance at p from the 8 surrounding voxel centres; false
   // when any of them is unobserved (weight 0) or missing.
   bool interpolateDistance(const Eigen::Vector3f& p, float* distance) const;
+  // The same, with the weight interpolated too.
+  bool interpolate(const Eigen::Vector3f& p, float* distance, float* weight) const;
+
+  // A deep copy (layers are move-only: blocks are owned).
+  TsdfLayer clone() const;
+  // Voxels with weight > 0.
+  size_t numObservedVoxels() const;
 
   const absl::flat_hash_map<BlockIndex, std::unique_ptr<TsdfBlock>, BlockIndexHash>& blocks()
       const {

@@ -1,0 +1,109 @@
+#include "core/matching/verification.h"
+
+#include <cmath>
+#include <vector>
+
+#include "absl/container/flat_hash_set.h"
+#include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
+
+namespace objdb::matching {
+namespace {
+
+// Calls fn(global voxel index, voxel) for every observed voxel of the layer.
+template <typename Fn>
+void forEachObserved(const tsdf::TsdfLayer& layer, Fn&& fn) {
+  const int vps = layer.voxelsPerSide();
+  for (const auto& [index, block] : layer.blocks()) {
+    const tsdf::VoxelIndex base = index * vps;
+    const auto& voxels = block->voxels();
+    for (size_t i = 0; i < voxels.size(); ++i) {
+      if (!(voxels[i].weight > 0.0f)) continue;
+      const tsdf::VoxelIndex v = base + Eigen::Vector3i(int(i % size_t(vps)),
+                                                        int((i / size_t(vps)) % size_t(vps)),
+                                                        int(i / size_t(vps * vps)));
+      fn(v, voxels[i]);
+    }
+  }
+}
+
+}  // namespace
+
+GridAgreement compareGrids(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLayer& moving,
+                           const Transform& T_fixed_moving) {
+  GridAgreement agreement;
+  const Eigen::Isometry3f T_moving_fixed = T_fixed_moving.inverse().cast<float>();
+  double sum = 0.0;
+  forEachObserved(fixed, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel& voxel) {
+    ++agreement.compared;
+    float d = 0.0f;
+    if (!moving.interpolateDistance(T_moving_fixed * fixed.voxelCenter(v), &d)) return;
+    ++agreement.overlap;
+    const double e = double(voxel.distance) - double(d);
+    sum += e * e;
+  });
+  agreement.rmse = agreement.overlap ? std::sqrt(sum / double(agreement.overlap)) : 0.0;
+  return agreement;
+}
+
+Verdict judge(const GridAgreement& agreement, const MergingParams& params, double voxel_size_m) {
+  Verdict verdict;
+  verdict.agreement = agreement;
+  verdict.min_overlap = params.minOverlapVoxels(voxel_size_m);
+  if (double(agreement.overlap) < verdict.min_overlap) {
+    verdict.reason = absl::StrFormat("overlap %d voxels < o*_TSDF %.0f", agreement.overlap,
+                                     verdict.min_overlap);
+  } else if (agreement.rmse > double(params.tsdf_max_rmse_m)) {
+    verdict.reason = absl::StrFormat("e_TSDF %.4f m > e*_TSDF %.4f m", agreement.rmse,
+                                     params.tsdf_max_rmse_m);
+  } else {
+    verdict.accepted = true;
+  }
+  return verdict;
+}
+
+size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
+                  const Transform& T_target_source, float max_weight) {
+  const Eigen::Isometry3f T_source_target = T_target_source.inverse().cast<float>();
+  const Eigen::Isometry3f T_ts = T_target_source.cast<float>();
+  // Target voxels to write: the observed ones, and those around every observed source voxel.
+  std::vector<tsdf::VoxelIndex> candidates;
+  absl::flat_hash_set<uint64_t> seen;
+  forEachObserved(*target, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) {
+    if (seen.insert(packGridKey(v)).second) candidates.push_back(v);
+  });
+  const float inv = 1.0f / target->voxelSize();
+  forEachObserved(source, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) {
+    const Eigen::Vector3f p = T_ts * source.voxelCenter(v);
+    const Eigen::Vector3i lower =
+        (p * inv - Eigen::Vector3f::Constant(0.5f)).array().floor().cast<int>();
+    for (int c = 0; c < 8; ++c) {
+      const tsdf::VoxelIndex t = lower + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+      if (seen.insert(packGridKey(t)).second) candidates.push_back(t);
+    }
+  });
+  // Resample first, write after: the writes must not feed later interpolations of the target.
+  struct Write {
+    tsdf::VoxelIndex index;
+    float distance, weight;
+  };
+  std::vector<Write> writes;
+  for (const tsdf::VoxelIndex& v : candidates) {
+    float ds = 0.0f, ws = 0.0f;
+    if (!source.interpolate(T_source_target * target->voxelCenter(v), &ds, &ws)) continue;
+    const tsdf::TsdfVoxel* t = target->voxel(v);
+    const float wt = t ? t->weight : 0.0f;
+    const float dt = t ? t->distance : 0.0f;
+    const float w = wt + ws;
+    writes.push_back({v, (wt * dt + ws * ds) / w, std::min(w, max_weight)});
+  }
+  for (const Write& w : writes) {
+    target->allocateBlock(target->blockOfVoxel(w.index));
+    tsdf::TsdfVoxel* voxel = target->voxel(w.index);
+    voxel->distance = w.distance;
+    voxel->weight = w.weight;
+  }
+  return writes.size();
+}
+
+}  // namespace objdb::matching

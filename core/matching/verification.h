@@ -1,0 +1,44 @@
+// TSDF verification and merging (paper §III-C.4): two grids are compared voxel by voxel after one
+// is resampled into the other's lattice by trilinear interpolation; the overlap o_TSDF (voxels
+// observed in both) and the RMSE e_TSDF of the distance pairs decide. An upside-down
+// registration puts positive distances (free space) on negative ones (inside): its RMSE is large
+// even when the surfaces coincide. Written by hand: no library does TSDF-to-TSDF checks.
+#pragma once
+
+#include <cstddef>
+#include <string>
+
+#include "core/common/params.h"
+#include "core/common/transform.h"
+#include "core/tsdf/tsdf_layer.h"
+
+namespace objdb::matching {
+
+struct GridAgreement {
+  size_t overlap = 0;   // o_TSDF: fixed voxels whose position is observed in `moving` too
+  size_t compared = 0;  // observed voxels of `fixed` looked at
+  double rmse = 0.0;    // e_TSDF over the overlap, metres (0 when there is none)
+};
+
+// Every observed voxel of `fixed` is looked up in `moving` at T_moving_fixed · centre (trilinear,
+// all 8 neighbours observed). T_fixed_moving maps moving's frame into fixed's.
+GridAgreement compareGrids(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLayer& moving,
+                           const Transform& T_fixed_moving);
+
+struct Verdict {
+  bool accepted = false;
+  GridAgreement agreement;
+  double min_overlap = 0.0;  // o*_TSDF at the grid's voxel size
+  std::string reason;        // why not, for logs and merge records
+};
+// Accepts when e_TSDF ≤ e*_TSDF and o_TSDF ≥ o*_TSDF (scaled to voxel_size, see MergingParams).
+Verdict judge(const GridAgreement& agreement, const MergingParams& params, double voxel_size_m);
+
+// t̂ = target ⊕ source: `source` resampled into target's lattice (T_target_source maps source into
+// target) and fused by weight: d = (w_t d_t + w_s d_s) / (w_t + w_s), w = min(w_t + w_s,
+// max_weight). Voxels only the source observed are added. Grids must share the voxel size.
+// Returns the number of target voxels written.
+size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
+                  const Transform& T_target_source, float max_weight);
+
+}  // namespace objdb::matching

@@ -1,0 +1,138 @@
+#include "core/matching/verification.h"
+
+#include <cmath>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "tests/support/sdf_grid.h"
+
+namespace objdb::matching {
+namespace {
+
+using objdb::testing::boxSdf;
+using objdb::testing::Sdf;
+using objdb::testing::sdfGrid;
+using objdb::testing::sphereSdf;
+using ::testing::HasSubstr;
+
+constexpr float kVoxel = 0.01f;
+const Eigen::Vector3f kLo = Eigen::Vector3f::Constant(-0.3f), kHi = Eigen::Vector3f::Constant(0.3f);
+
+Transform translation(double x, double y, double z) {
+  Transform T = Transform::Identity();
+  T.translation() = Eigen::Vector3d(x, y, z);
+  return T;
+}
+
+TEST(CompareGrids, IdenticalGridsAgreeExactly) {
+  auto a = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  auto b = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  const GridAgreement g = compareGrids(a.layer, b.layer, Transform::Identity());
+  EXPECT_EQ(g.compared, a.layer.numObservedVoxels());
+  // The band's outer rim (2 of its 7 layers) lacks full neighbourhoods.
+  EXPECT_GT(g.overlap, g.compared * 7 / 10);
+  EXPECT_LT(g.rmse, 1e-6);
+}
+
+TEST(CompareGrids, MeasuresAKnownOffsetAndTheTransformRemovesIt) {
+  // The moving sphere sits 6 mm further along x; distances differ by 6 mm · cos(angle).
+  auto fixed = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  auto moving = sdfGrid(sphereSdf({0.006f, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  const GridAgreement off = compareGrids(fixed.layer, moving.layer, Transform::Identity());
+  // RMS of 6 mm · cos over a sphere: 6 / √3 mm.
+  EXPECT_NEAR(off.rmse, 0.006 / std::sqrt(3.0), 0.0005);
+  // T_fixed_moving: the moving frame's sphere lies at −6 mm in fixed's frame.
+  const GridAgreement aligned =
+      compareGrids(fixed.layer, moving.layer, translation(-0.006, 0, 0));
+  EXPECT_LT(aligned.rmse, 0.0005);  // trilinear interpolation of a curved field
+  EXPECT_GT(aligned.overlap, fixed.layer.numObservedVoxels() * 7 / 10);
+}
+
+TEST(CompareGrids, AnUpsideDownSurfaceFailsWhereTheSurfacesCoincide) {
+  // The top face of a plate, observed from above (free space +, inside −). Turned upside down
+  // about an axis in that face, the surface lands on itself but inside and outside swap.
+  const float top = 0.05f;
+  auto plate = sdfGrid(boxSdf({0, 0, 0}, {0.2f, 0.2f, top}), Eigen::Vector3f(-0.15f, -0.15f, 0.0f),
+                       Eigen::Vector3f(0.15f, 0.15f, 0.1f), kVoxel, 3 * kVoxel);
+  Transform flip = translation(0, 0, top) *
+                   Transform(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX())) *
+                   translation(0, 0, -top);
+  const GridAgreement right = compareGrids(plate.layer, plate.layer, Transform::Identity());
+  const GridAgreement upside_down = compareGrids(plate.layer, plate.layer, flip);
+  ASSERT_GT(upside_down.overlap, 1000u);  // the flipped band overlaps the original
+  EXPECT_LT(right.rmse, 1e-6);
+  EXPECT_GT(upside_down.rmse, 0.02);  // opposite signs: about twice the distance
+  MergingParams params;
+  params.tsdf_min_overlap_voxels = 100.0f;
+  EXPECT_TRUE(judge(right, params, kVoxel).accepted);
+  const Verdict verdict = judge(upside_down, params, kVoxel);
+  EXPECT_FALSE(verdict.accepted);
+  EXPECT_THAT(verdict.reason, HasSubstr("e_TSDF"));
+}
+
+TEST(Judge, AppliesBothThresholdsWithTheOverlapScaledToTheVoxelSize) {
+  MergingParams params;  // e* = 2 cm, o* = 10^4 voxels at 1 cm
+  GridAgreement g;
+  g.overlap = 9999;
+  g.rmse = 0.001;
+  Verdict v = judge(g, params, 0.01);
+  EXPECT_FALSE(v.accepted);
+  EXPECT_THAT(v.reason, HasSubstr("overlap 9999 voxels < o*_TSDF 10000"));
+  g.overlap = 2500;  // at 2 cm voxels the band holds a quarter as many voxels
+  EXPECT_TRUE(judge(g, params, 0.02).accepted);
+  g.rmse = 0.021;
+  v = judge(g, params, 0.02);
+  EXPECT_FALSE(v.accepted);
+  EXPECT_THAT(v.reason, HasSubstr("e_TSDF 0.0210 m > e*_TSDF 0.0200 m"));
+}
+
+// A linear field d = z − offset on a slab of voxels, every voxel with `weight`.
+tsdf::TsdfLayer linearField(float offset, float weight, float x_min, float x_max) {
+  const Sdf plane = [offset](const Eigen::Vector3f& p) { return p.z() - offset; };
+  return sdfGrid(plane, Eigen::Vector3f(x_min, -0.1f, -0.1f), Eigen::Vector3f(x_max, 0.1f, 0.1f),
+                 kVoxel, 0.05f, weight)
+      .layer;
+}
+
+TEST(MergeGrids, WeightedAverageWhereBothAndSourceValuesWhereOnlyItObserved) {
+  tsdf::TsdfLayer target = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  const tsdf::TsdfLayer source = linearField(0.01f, 1.0f, -0.1f, 0.3f);
+  const size_t written = mergeGrids(&target, source, Transform::Identity(), 100.0f);
+  EXPECT_GT(written, 0u);
+  // Inside both: (2 · z + 1 · (z − 0.01)) / 3, weight 3.
+  const tsdf::VoxelIndex both = target.voxelIndexOf(Eigen::Vector3f(0.0f, 0.0f, 0.013f));
+  const tsdf::TsdfVoxel* v = target.voxel(both);
+  ASSERT_NE(v, nullptr);
+  const float z = target.voxelCenter(both).z();
+  EXPECT_NEAR(v->distance, z - 0.01f / 3.0f, 1e-6f);
+  EXPECT_FLOAT_EQ(v->weight, 3.0f);
+  // Only the source saw x = 0.2: its values and weight.
+  const tsdf::VoxelIndex only = target.voxelIndexOf(Eigen::Vector3f(0.2f, 0.0f, 0.013f));
+  v = target.voxel(only);
+  ASSERT_NE(v, nullptr);
+  EXPECT_NEAR(v->distance, target.voxelCenter(only).z() - 0.01f, 1e-6f);
+  EXPECT_FLOAT_EQ(v->weight, 1.0f);
+  // Weights saturate at max_weight.
+  tsdf::TsdfLayer capped = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  mergeGrids(&capped, source, Transform::Identity(), 2.5f);
+  EXPECT_FLOAT_EQ(capped.voxel(both)->weight, 2.5f);
+}
+
+TEST(MergeGrids, ATransformedSourceLandsWhereTheTransformSays) {
+  // The same box in two frames: source frame = target frame moved by T.
+  const Sdf box = boxSdf({0, 0, 0}, {0.1f, 0.08f, 0.06f});
+  const Transform T_target_source =
+      translation(0.05, -0.02, 0.03) * Transform(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()));
+  const Sdf in_source = objdb::testing::transformedSdf(box, T_target_source.inverse().cast<float>());
+  auto source = sdfGrid(in_source, kLo, kHi, kVoxel, 3 * kVoxel);
+  auto truth = sdfGrid(box, kLo, kHi, kVoxel, 3 * kVoxel);
+  tsdf::TsdfLayer target = tsdf::TsdfLayer::create(kVoxel, 8).value();
+  mergeGrids(&target, source.layer, T_target_source, 100.0f);
+  const GridAgreement g = compareGrids(truth.layer, target, Transform::Identity());
+  EXPECT_GT(g.overlap, truth.layer.numObservedVoxels() / 2);
+  EXPECT_LT(g.rmse, 0.002);
+}
+
+}  // namespace
+}  // namespace objdb::matching
