@@ -112,6 +112,14 @@ Status MergingParams::validate() const {
   return positive(reference_voxel_size_m, "merging.reference_voxel_size_m");
 }
 
+Status DatabaseParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(
+      inRange(prefilter_neighbours, 1, 10000, "database.prefilter_neighbours"));
+  OBJDB_RETURN_IF_ERROR(inRange(prefilter_min_votes, 1, 100000, "database.prefilter_min_votes"));
+  OBJDB_RETURN_IF_ERROR(inRange(max_candidates, 1, 100000, "database.max_candidates"));
+  return inRange(threads, 1, 256, "database.threads");
+}
+
 Status Params::validate() const {
   OBJDB_RETURN_IF_ERROR(segmentation.validate());
   OBJDB_RETURN_IF_ERROR(tsdf.validate());
@@ -120,7 +128,8 @@ Status Params::validate() const {
   OBJDB_RETURN_IF_ERROR(keypoints.validate());
   OBJDB_RETURN_IF_ERROR(descriptors.validate());
   OBJDB_RETURN_IF_ERROR(matching.validate());
-  return merging.validate();
+  OBJDB_RETURN_IF_ERROR(merging.validate());
+  return database.validate();
 }
 
 }  // namespace objdb

@@ -95,7 +95,7 @@ struct MatchingParams {
   // Ours (not in table I): RANSAC over the descriptor matches, then point-to-plane ICP.
   float ransac_inlier_distance_m = 0.03f;  // a match agrees with a transform within this
   int ransac_iterations = 10000;
-  int ransac_min_inliers = 6;              // fewer: no consistent set, candidate rejected
+  int ransac_min_inliers = 4;              // fewer: no consistent set, candidate rejected
   float icp_max_correspondence_m = 0.05f;  // ICP pairs farther apart are ignored
   int icp_iterations = 30;
   Status validate() const;
@@ -114,6 +114,18 @@ struct MergingParams {
   Status validate() const;
 };
 
+// Object database (Algorithm 1 around the paper's steps; ours).
+struct DatabaseParams {
+  // Candidate prefilter: every keypoint descriptor of a new model votes for the models owning
+  // its prefilter_neighbours nearest descriptors (similarity ≥ t_sim); models with at least
+  // prefilter_min_votes votes are candidates, the max_candidates most voted first.
+  int prefilter_neighbours = 20;
+  int prefilter_min_votes = 3;
+  int max_candidates = 32;
+  int threads = 2;  // candidate registrations in parallel
+  Status validate() const;
+};
+
 struct Params {
   SegmentationParams segmentation;
   TsdfParams tsdf;
@@ -123,6 +135,7 @@ struct Params {
   DescriptorParams descriptors;
   MatchingParams matching;
   MergingParams merging;
+  DatabaseParams database;
   Status validate() const;
 };
 

@@ -85,6 +85,13 @@ void forEachField(MergingParams& p, Fn&& fn) {
   fn("reference_voxel_size_m", p.reference_voxel_size_m);
 }
 template <typename Fn>
+void forEachField(DatabaseParams& p, Fn&& fn) {
+  fn("prefilter_neighbours", p.prefilter_neighbours);
+  fn("prefilter_min_votes", p.prefilter_min_votes);
+  fn("max_candidates", p.max_candidates);
+  fn("threads", p.threads);
+}
+template <typename Fn>
 void forEachSection(Params& p, Fn&& fn) {
   fn("segmentation", p.segmentation);
   fn("tsdf", p.tsdf);
@@ -94,6 +101,7 @@ void forEachSection(Params& p, Fn&& fn) {
   fn("descriptors", p.descriptors);
   fn("matching", p.matching);
   fn("merging", p.merging);
+  fn("database", p.database);
 }
 
 template <typename T>
@@ -167,7 +175,8 @@ Status applyParamsJson(absl::string_view text, Params* params) {
   for (const auto& [key, value] : root.items()) {
     Status status = absl::InvalidArgumentError(absl::StrCat(
         "unknown config section '", key,
-        "' (known: segmentation, tsdf, gsm, model, keypoints, descriptors, matching, merging)"));
+        "' (known: segmentation, tsdf, gsm, model, keypoints, descriptors, matching, merging, "
+        "database)"));
     forEachSection(updated, [&](const char* name, auto& section) {
       if (key == name) status = applySection(value, key, &section);
     });

@@ -2,15 +2,17 @@
 // heaviest: see DESIGN.md).
 #include "core/matching/registration.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <random>
+
+#include <Eigen/Geometry>
 
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 #include <pcl/registration/icp.h>
-#include <pcl/sample_consensus/msac.h>
-#include <pcl/sample_consensus/sac_model_registration.h>
 #include <pcl/search/kdtree.h>
 
 #include "absl/strings/str_format.h"
@@ -104,6 +106,111 @@ std::vector<DescriptorMatch> matchDescriptors(const std::vector<model::Fpfh>& so
   return matches;
 }
 
+CoarseAlignment estimateCoarseAlignment(const std::vector<Eigen::Vector3f>& from,
+                                        const std::vector<Eigen::Vector3f>& to,
+                                        const PointCloud& source_cloud,
+                                        const tsdf::TsdfLayer& target_grid,
+                                        const MatchingParams& params) {
+  CoarseAlignment result;
+  const size_t n = std::min(from.size(), to.size());
+  if (n < 3) return result;
+  const float threshold = params.ransac_inlier_distance_m;
+  const float threshold2 = threshold * threshold;
+  auto fit = [&](const std::vector<size_t>& pairs) {
+    Eigen::Matrix3Xf a(3, pairs.size()), b(3, pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      a.col(Eigen::Index(k)) = from[pairs[k]];
+      b.col(Eigen::Index(k)) = to[pairs[k]];
+    }
+    return Eigen::Matrix4f(Eigen::umeyama(a, b, false));
+  };
+  auto inliersOf = [&](const Eigen::Matrix4f& T, std::vector<size_t>* out) {
+    const Eigen::Matrix3f R = T.topLeftCorner<3, 3>();
+    const Eigen::Vector3f tr = T.topRightCorner<3, 1>();
+    size_t count = 0;
+    for (size_t k = 0; k < n; ++k) {
+      if ((R * from[k] + tr - to[k]).squaredNorm() < threshold2) {
+        ++count;
+        if (out) out->push_back(k);
+      }
+    }
+    return count;
+  };
+
+  // Sampling: three matches whose pairwise distances agree within 10 % on both sides (rigid
+  // motions keep them; the check rejects most bad samples before any fit).
+  struct Hypothesis {
+    Eigen::Matrix4f T;
+    size_t inliers;
+  };
+  std::vector<Hypothesis> best;  // the most supported, at most kKeep
+  constexpr size_t kKeep = 8;
+  std::mt19937 rng(20181001u);  // fixed: registration is deterministic
+  std::uniform_int_distribution<size_t> pick(0, n - 1);
+  const float min_edge = 2.0f * threshold;
+  for (int it = 0; it < params.ransac_iterations; ++it) {
+    const size_t i = pick(rng), j = pick(rng), k = pick(rng);
+    if (i == j || j == k || i == k) continue;
+    bool similar = true;
+    const size_t idx[3] = {i, j, k};
+    for (int e = 0; e < 3 && similar; ++e) {
+      const size_t p = idx[e], q = idx[(e + 1) % 3];
+      const float ds = (from[p] - from[q]).norm(), dt = (to[p] - to[q]).norm();
+      similar = ds > min_edge && dt > min_edge && std::abs(ds - dt) < 0.1f * std::max(ds, dt);
+    }
+    if (!similar) continue;
+    const Eigen::Matrix4f T = fit({i, j, k});
+    if (!T.allFinite()) continue;
+    const size_t support = inliersOf(T, nullptr);
+    if (support < size_t(params.ransac_min_inliers)) continue;
+    ++result.hypotheses;
+    if (best.size() < kKeep || support > best.back().inliers) {
+      best.push_back({T, support});
+      std::stable_sort(best.begin(), best.end(),
+                       [](const auto& x, const auto& y) { return x.inliers > y.inliers; });
+      if (best.size() > kKeep) best.pop_back();
+    }
+  }
+  if (best.empty()) return result;
+
+  // The keypoints alone cannot tell a right hypothesis from a symmetric wrong one with as much
+  // support, and surface-to-surface fitness prefers whatever tucks a partial view inside the
+  // other's coverage. The target's TSDF can: each candidate (refined on its inliers) maps the
+  // source surface into the target grid; a point where the target observed surface agrees, one
+  // where it observed free space or inside disagrees, unobserved space is neutral.
+  double best_score = -2.0;
+  const size_t stride = std::max<size_t>(1, source_cloud.points.size() / 1000);
+  for (const Hypothesis& h : best) {
+    std::vector<size_t> support;
+    inliersOf(h.T, &support);
+    const Eigen::Matrix4f T = support.size() >= 3 ? fit(support) : h.T;
+    const Eigen::Matrix3f R = T.topLeftCorner<3, 3>();
+    const Eigen::Vector3f tr = T.topRightCorner<3, 1>();
+    long agree = 0, disagree = 0, tried = 0;
+    for (size_t p = 0; p < source_cloud.points.size(); p += stride) {
+      ++tried;
+      float d = 0.0f;
+      if (!target_grid.interpolateDistance(R * source_cloud.points[p] + tr, &d)) continue;
+      if (std::abs(d) < threshold) {
+        ++agree;
+      } else {
+        ++disagree;
+      }
+    }
+    const double score = tried ? double(agree - disagree) / double(tried) : 0.0;
+    if (score > best_score) {
+      best_score = score;
+      result.T_target_source = Transform(T.cast<double>());
+      result.inliers = inliersOf(T, nullptr);
+      result.fitness = score;
+    }
+  }
+  // Orthonormalise the float round trip.
+  const Eigen::Quaterniond q(result.T_target_source.rotation());
+  result.T_target_source.linear() = q.normalized().toRotationMatrix();
+  return result;
+}
+
 Registration registerModels(const model::ObjectModel& source, const model::ObjectModel& target,
                             const DescriptorIndex& target_index, const MatchingParams& params) {
   Registration r;
@@ -120,40 +227,21 @@ Registration registerModels(const model::ObjectModel& source, const model::Objec
 
   // RANSAC over the matches: a consistent set and the coarse transform.
   t = Clock::now();
-  // One point pair per match (a keypoint may appear in up to k_NN matches; PCL's sample
-  // consensus wants each sample index once): pair i of `from` goes to pair i of `to`.
-  auto from = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  auto to = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  std::vector<Eigen::Vector3f> from, to;
   for (const auto& m : matches) {
-    const Eigen::Vector3f a = source.keypoint(m.source), b = target.keypoint(m.target);
-    from->push_back(pcl::PointXYZ(a.x(), a.y(), a.z()));
-    to->push_back(pcl::PointXYZ(b.x(), b.y(), b.z()));
+    from.push_back(source.keypoint(m.source));
+    to.push_back(target.keypoint(m.target));
   }
-  // MSAC rather than plain RANSAC: a symmetric part of an object offers a wrong hypothesis with
-  // as many inliers as the right one; scoring by truncated residuals prefers the precise one.
-  auto model = std::make_shared<pcl::SampleConsensusModelRegistration<pcl::PointXYZ>>(from);
-  model->setInputTarget(to);
-  pcl::MEstimatorSampleConsensus<pcl::PointXYZ> msac(model, params.ransac_inlier_distance_m);
-  msac.setMaxIterations(params.ransac_iterations);
-  std::vector<int> inliers;
-  Eigen::VectorXf coefficients;
-  if (msac.computeModel()) {
-    msac.getInliers(inliers);
-    msac.getModelCoefficients(coefficients);
-  }
-  r.inliers = inliers.size();
+  const CoarseAlignment coarse = estimateCoarseAlignment(from, to, source.cloud, target.grid, params);
+  r.inliers = coarse.inliers;
+  r.hypotheses = coarse.hypotheses;
   r.ransac_ms = msSince(t);
-  if (inliers.size() < size_t(params.ransac_min_inliers) || coefficients.size() != 16) {
-    r.reason = absl::StrFormat("RANSAC found %d consistent matches < %d needed", inliers.size(),
+  if (coarse.inliers < size_t(params.ransac_min_inliers)) {
+    r.reason = absl::StrFormat("RANSAC found %d consistent matches < %d needed", coarse.inliers,
                                params.ransac_min_inliers);
     return r;
   }
-  // Least squares over the inliers.
-  Eigen::VectorXf refined;
-  model->optimizeModelCoefficients(inliers, coefficients, refined);
-  const Eigen::Matrix4f coarse = Eigen::Map<const Eigen::Matrix<float, 4, 4, Eigen::RowMajor>>(
-      refined.size() == 16 ? refined.data() : coefficients.data());
-  r.T_coarse = Transform(coarse.cast<double>());
+  r.T_coarse = coarse.T_target_source;
 
   // Point-to-plane ICP from the coarse transform.
   t = Clock::now();

@@ -3,9 +3,10 @@
 // transform (rejected when no consistent set exists), point-to-plane ICP for the fine one,
 // rejected when its RMSE exceeds e*_ICP. PCL stays inside registration.cpp.
 //
-// Choices the paper leaves open: RANSAC is MSAC (truncated residuals break the tie a symmetric
-// part offers between a right and a wrong hypothesis), refined by least squares over its
-// inliers; e_ICP is the point-to-plane RMSE over the pairs within the correspondence distance.
+// Choices the paper leaves open: RANSAC is ours (estimateCoarseAlignment: PCL's sample
+// consensus keeps one hypothesis by keypoint support, and a symmetric part of an object offers a
+// wrong one with as much support as the right one); e_ICP is the point-to-plane RMSE over the
+// pairs within the correspondence distance.
 #pragma once
 
 #include <cstdint>
@@ -50,12 +51,31 @@ std::vector<DescriptorMatch> matchDescriptors(const std::vector<model::Fpfh>& so
                                               const DescriptorIndex& target,
                                               const MatchingParams& params);
 
+// The coarse step: RANSAC over matched keypoint pairs (from[k] ↔ to[k]). Samples of three
+// pairs whose pairwise distances agree are fitted (Umeyama, no scale) and counted; the best
+// supported hypotheses are refined on their inliers and the winner is the one the target's TSDF
+// agrees with most: source surface points landing on observed target surface count for it,
+// those landing in observed free space or inside count against it (keypoints alone cannot tell
+// a symmetric wrong hypothesis from the right one). Deterministic (fixed seed).
+struct CoarseAlignment {
+  Transform T_target_source = Transform::Identity();
+  size_t inliers = 0;       // keypoint pairs within the inlier distance (0: no hypothesis)
+  size_t hypotheses = 0;    // samples with at least ransac_min_inliers support
+  double fitness = 0.0;     // (agreeing − disagreeing) / sampled source points, in [−1, 1]
+};
+CoarseAlignment estimateCoarseAlignment(const std::vector<Eigen::Vector3f>& from,
+                                        const std::vector<Eigen::Vector3f>& to,
+                                        const PointCloud& source_cloud,
+                                        const tsdf::TsdfLayer& target_grid,
+                                        const MatchingParams& params);
+
 struct Registration {
   bool accepted = false;
   std::string reason;                                   // why not
   Transform T_target_source = Transform::Identity();    // T_{j,i} = T_fine · T_coarse
   Transform T_coarse = Transform::Identity();
   size_t matches = 0, inliers = 0;                      // descriptor matches, RANSAC inliers
+  size_t hypotheses = 0;                                // RANSAC samples with enough support
   double icp_rmse = 0.0;   // e_ICP: point-to-plane RMSE over the final pairs, metres
   size_t icp_pairs = 0;    // source points paired within the ICP correspondence distance
   double match_ms = 0, ransac_ms = 0, icp_ms = 0;

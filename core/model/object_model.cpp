@@ -121,6 +121,7 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
   OBJDB_RETURN_IF_ERROR(params.keypoints.validate());
   OBJDB_RETURN_IF_ERROR(params.descriptors.validate());
   ObjectModel model(std::move(grid));
+  model.surface_voxels = voxels;
   auto t = Clock::now();
   OBJDB_ASSIGN_OR_RETURN(PointCloud surface,
                          surfaceCloud(model.grid, voxels, params.mesh_min_weight));

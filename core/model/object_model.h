@@ -3,9 +3,8 @@
 // cloud with normals; a RANSAC plane test flags planar segments (stored, never matched); the
 // rest get ISS + Harris3D keypoints and FPFH descriptors for matching.
 //
-// Frames: the grid, cloud and keypoints live in the model's own frame; poses[0] is where that
-// frame sits in the world of the session that first saw it (T_world_object); merging adds the
-// poses of the other observations.
+// Frames: the grid, cloud and keypoints live in the model's own frame, the frame of its first
+// raw segment; each observation says where that frame sat in a session's world.
 #pragma once
 
 #include <array>
@@ -25,11 +24,14 @@ namespace objdb::model {
 
 using Fpfh = std::array<float, 33>;
 
-// One observation of the object: where the model frame was in a session's world.
-struct ModelPose {
+// One observation of the object: a raw segment (session, GSM label) fused into the model, where
+// the model frame was in that session's world, and where the segment's own frame sits in the
+// model frame. The poses 𝕋 of the paper and the model's lineage in one list.
+struct Observation {
   std::string session;
-  int64_t raw_segment = 0;  // id of the raw segment it came from (0 = unknown)
+  uint32_t label = 0;
   Transform T_world_object = Transform::Identity();
+  Transform T_object_segment = Transform::Identity();
 };
 
 // Time spent building a model, ms (paper table II: P, K, D).
@@ -41,15 +43,14 @@ struct ObjectModel {
   explicit ObjectModel(tsdf::TsdfLayer model_grid) : grid(std::move(model_grid)) {}
 
   int64_t id = 0;
-  std::vector<ModelPose> poses;            // 𝕋: first = base frame
+  std::vector<Observation> observations;   // 𝕋 and lineage; the first defines the model frame
   tsdf::TsdfLayer grid;                    // model frame
+  std::vector<tsdf::VoxelIndex> surface_voxels;  // the segments' voxels, model frame
   PointCloud cloud;                        // surface points + unit normals (outward), model frame
   std::vector<uint32_t> keypoint_indices;  // into cloud.points (ISS ∪ Harris3D)
   std::vector<Fpfh> descriptors;           // one per keypoint
   bool planar = false;                     // planar segments are stored, never matched
   float plane_inlier_ratio = 0.0f;         // share of points on the best plane
-  std::vector<int64_t> raw_segments;       // lineage: raw segments fused into this model
-  std::vector<int64_t> merged_from;        // lineage: models merged into this one
   BuildTimings timings;
 
   // Matchable: not planar, enough points, at least 3 described keypoints.

@@ -69,20 +69,30 @@ bool TsdfLayer::interpolateDistance(const Eigen::Vector3f& p, float* distance) c
 
 bool TsdfLayer::interpolate(const Eigen::Vector3f& p, float* distance, float* weight) const {
   // Voxel centres sit at (i + 0.5) · voxel_size: shift so the lower corner index is floor().
-  const Eigen::Vector3f q = p * inv_voxel_size_ - Eigen::Vector3f::Constant(0.5f);
+  Eigen::Vector3f q = p * inv_voxel_size_ - Eigen::Vector3f::Constant(0.5f);
+  // Within float rounding of a lattice plane, sit on it (a voxel centre mapped through an
+  // identity transform must read that voxel alone).
+  for (int k = 0; k < 3; ++k) {
+    const float r = std::round(q[k]);
+    if (std::abs(q[k] - r) < 1e-4f) q[k] = r;
+  }
   const Eigen::Vector3f lower = q.array().floor();
   const Eigen::Vector3f f = q - lower;
   const VoxelIndex base = lower.cast<int>();
   float d = 0.0f, w = 0.0f;
   for (int corner = 0; corner < 8; ++corner) {
     const Eigen::Vector3i offset(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-    const TsdfVoxel* v = voxel(base + offset);
-    if (v == nullptr || !(v->weight > 0.0f)) return false;
     const float wx = offset.x() ? f.x() : 1.0f - f.x();
     const float wy = offset.y() ? f.y() : 1.0f - f.y();
     const float wz = offset.z() ? f.z() : 1.0f - f.z();
-    d += wx * wy * wz * v->distance;
-    w += wx * wy * wz * v->weight;
+    const float c = wx * wy * wz;
+    // A corner that does not contribute need not be observed: at a voxel centre the value is
+    // that voxel's, whatever its neighbours.
+    if (c == 0.0f) continue;
+    const TsdfVoxel* v = voxel(base + offset);
+    if (v == nullptr || !(v->weight > 0.0f)) return false;
+    d += c * v->distance;
+    w += c * v->weight;
   }
   *distance = d;
   *weight = w;

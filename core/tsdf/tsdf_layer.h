@@ -76,7 +76,8 @@ class TsdfLayer {
   TsdfVoxel* voxel(const VoxelIndex& v);
 
   // Trilinear interpolation of the distance at p from the 8 surrounding voxel centres; false
-  // when any of them is unobserved (weight 0) or missing.
+  // when any of them with a non-zero interpolation weight is unobserved (weight 0) or missing
+  // (at a voxel centre only that voxel is needed).
   bool interpolateDistance(const Eigen::Vector3f& p, float* distance) const;
   // The same, with the weight interpolated too.
   bool interpolate(const Eigen::Vector3f& p, float* distance, float* weight) const;

@@ -37,6 +37,14 @@ Sdf boxSdf(const Eigen::Vector3f& centre, const Eigen::Vector3f& half) {
   };
 }
 
+Sdf cylinderSdf(const Eigen::Vector3f& centre, float radius, float half_height) {
+  return [=](const Eigen::Vector3f& p) {
+    const Eigen::Vector3f q = p - centre;
+    const Eigen::Vector2f d(q.head<2>().norm() - radius, std::abs(q.z()) - half_height);
+    return std::min(std::max(d.x(), d.y()), 0.0f) + d.cwiseMax(0.0f).norm();
+  };
+}
+
 Sdf unionSdf(std::vector<Sdf> parts) {
   return [parts = std::move(parts)](const Eigen::Vector3f& p) {
     float d = INFINITY;

@@ -25,6 +25,8 @@ SdfGrid sdfGrid(const Sdf& sdf, const Eigen::Vector3f& lo, const Eigen::Vector3f
 Sdf sphereSdf(const Eigen::Vector3f& centre, float radius);
 // Axis-aligned box with the given centre and half extents (exact distance inside and out).
 Sdf boxSdf(const Eigen::Vector3f& centre, const Eigen::Vector3f& half);
+// Capped cylinder along z: radius, half height.
+Sdf cylinderSdf(const Eigen::Vector3f& centre, float radius, float half_height);
 // Union of shapes (min of distances: exact outside, a lower bound inside).
 Sdf unionSdf(std::vector<Sdf> parts);
 // The shape moved by T (p ↦ sdf(T⁻¹ p)).

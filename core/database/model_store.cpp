@@ -1,0 +1,89 @@
+#include "core/database/model_store.h"
+
+#include "absl/strings/str_format.h"
+
+namespace objdb::database {
+
+Status InMemoryModelStore::putRawSegment(const RawSegmentRecord& segment) {
+  if (segment.grid == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "raw segment %s/%d has no grid", segment.key.session, segment.key.label));
+  }
+  std::lock_guard lock(mutex_);
+  segments_[segment.key] = std::make_shared<const RawSegmentRecord>(segment);
+  return absl::OkStatus();
+}
+
+StatusOr<std::shared_ptr<const RawSegmentRecord>> InMemoryModelStore::rawSegment(
+    const SegmentKey& key) const {
+  std::lock_guard lock(mutex_);
+  const auto it = segments_.find(key);
+  if (it == segments_.end()) {
+    return absl::NotFoundError(
+        absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+  }
+  return it->second;
+}
+
+StatusOr<int64_t> InMemoryModelStore::addModel(model::ObjectModel model) {
+  std::lock_guard lock(mutex_);
+  model.id = next_id_++;
+  const int64_t id = model.id;
+  models_[id] = std::make_shared<const model::ObjectModel>(std::move(model));
+  return id;
+}
+
+Status InMemoryModelStore::replaceModel(model::ObjectModel model,
+                                        const std::optional<MergeRecord>& merge) {
+  std::lock_guard lock(mutex_);
+  const auto it = models_.find(model.id);
+  if (it == models_.end()) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to replace", model.id));
+  }
+  it->second = std::make_shared<const model::ObjectModel>(std::move(model));
+  if (merge) merges_.push_back(*merge);
+  return absl::OkStatus();
+}
+
+Status InMemoryModelStore::removeModel(int64_t id) {
+  std::lock_guard lock(mutex_);
+  if (models_.erase(id) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to remove", id));
+  }
+  return absl::OkStatus();
+}
+
+StatusOr<std::shared_ptr<const model::ObjectModel>> InMemoryModelStore::model(int64_t id) const {
+  std::lock_guard lock(mutex_);
+  const auto it = models_.find(id);
+  if (it == models_.end()) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
+  return it->second;
+}
+
+std::vector<int64_t> InMemoryModelStore::modelIds() const {
+  std::lock_guard lock(mutex_);
+  std::vector<int64_t> ids;
+  ids.reserve(models_.size());
+  for (const auto& [id, model] : models_) ids.push_back(id);
+  return ids;
+}
+
+std::vector<MergeRecord> InMemoryModelStore::mergeRecords() const {
+  std::lock_guard lock(mutex_);
+  return merges_;
+}
+
+std::shared_ptr<const tsdf::TsdfLayer> InMemoryModelStore::scene(
+    const std::string& session) const {
+  std::lock_guard lock(mutex_);
+  const auto it = scenes_.find(session);
+  return it == scenes_.end() ? nullptr : it->second;
+}
+
+void InMemoryModelStore::setScene(const std::string& session,
+                                  std::shared_ptr<const tsdf::TsdfLayer> scene) {
+  std::lock_guard lock(mutex_);
+  scenes_[session] = std::move(scene);
+}
+
+}  // namespace objdb::database

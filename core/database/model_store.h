@@ -1,0 +1,96 @@
+// What the object database needs from storage (paper §III-C, Algorithm 1's Ω): raw segments
+// keyed by (session, GSM label), object models, merge records and the scene map of each session
+// (for model-to-scene verification). Every mutating call is one unit — the SQLite store (issue 6)
+// makes each a transaction. InMemoryModelStore serves tests and offline benchmarks.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/common/transform.h"
+#include "core/model/object_model.h"
+#include "core/tsdf/tsdf_layer.h"
+
+namespace objdb::database {
+
+struct SegmentKey {
+  std::string session;
+  uint32_t label = 0;  // GSM label
+  auto operator<=>(const SegmentKey&) const = default;
+};
+
+// A raw segment as the database keeps it: its grid in its own frame and where that frame is.
+struct RawSegmentRecord {
+  SegmentKey key;
+  Transform T_world_segment = Transform::Identity();
+  std::shared_ptr<const tsdf::TsdfLayer> grid;
+  std::vector<tsdf::VoxelIndex> voxels;  // the label's voxels, segment frame
+  int64_t extraction_frame = 0;
+};
+
+// Evidence of one merge (the numbers the verification produced), persisted with it.
+struct MergeRecord {
+  int64_t target = 0;  // model that absorbed
+  std::string source;  // what was merged in: "segment <session>/<label>" or "model <id>"
+  Transform T_target_source = Transform::Identity();
+  double icp_rmse_m = 0.0;
+  double tsdf_rmse_m = 0.0;
+  size_t tsdf_overlap = 0;
+  size_t scene_checks = 0;  // model-to-scene verifications passed
+};
+
+class ModelStore {
+ public:
+  virtual ~ModelStore() = default;
+
+  // Stores a raw segment, replacing an earlier one with the same key.
+  virtual Status putRawSegment(const RawSegmentRecord& segment) = 0;
+  virtual StatusOr<std::shared_ptr<const RawSegmentRecord>> rawSegment(
+      const SegmentKey& key) const = 0;
+
+  // Adds a model; the store assigns and returns its id (stable, never reused).
+  virtual StatusOr<int64_t> addModel(model::ObjectModel model) = 0;
+  // Replaces model `model.id`; with a merge record in the same unit when given.
+  virtual Status replaceModel(model::ObjectModel model,
+                              const std::optional<MergeRecord>& merge) = 0;
+  virtual Status removeModel(int64_t id) = 0;
+  virtual StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const = 0;
+  // Ids of the stored models, ascending.
+  virtual std::vector<int64_t> modelIds() const = 0;
+  virtual std::vector<MergeRecord> mergeRecords() const = 0;
+
+  // The scene map of a session (null when unknown).
+  virtual std::shared_ptr<const tsdf::TsdfLayer> scene(const std::string& session) const = 0;
+};
+
+class InMemoryModelStore : public ModelStore {
+ public:
+  Status putRawSegment(const RawSegmentRecord& segment) override;
+  StatusOr<std::shared_ptr<const RawSegmentRecord>> rawSegment(
+      const SegmentKey& key) const override;
+  StatusOr<int64_t> addModel(model::ObjectModel model) override;
+  Status replaceModel(model::ObjectModel model, const std::optional<MergeRecord>& merge) override;
+  Status removeModel(int64_t id) override;
+  StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
+  std::vector<int64_t> modelIds() const override;
+  std::vector<MergeRecord> mergeRecords() const override;
+  std::shared_ptr<const tsdf::TsdfLayer> scene(const std::string& session) const override;
+
+  void setScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene);
+
+ private:
+  mutable std::mutex mutex_;
+  std::map<SegmentKey, std::shared_ptr<const RawSegmentRecord>> segments_;
+  std::map<int64_t, std::shared_ptr<const model::ObjectModel>> models_;
+  std::vector<MergeRecord> merges_;
+  std::map<std::string, std::shared_ptr<const tsdf::TsdfLayer>> scenes_;
+  int64_t next_id_ = 1;
+};
+
+}  // namespace objdb::database

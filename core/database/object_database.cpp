@@ -1,0 +1,321 @@
+#include "core/database/object_database.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <set>
+#include <thread>
+
+#include "absl/container/flat_hash_set.h"
+#include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
+#include "core/common/logging.h"
+
+namespace objdb::database {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+}
+
+SegmentKey keyOf(const model::Observation& o) { return {o.session, o.label}; }
+
+}  // namespace
+
+StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& params,
+                                                                 ModelStore* store) {
+  OBJDB_RETURN_IF_ERROR(params.validate());
+  if (store == nullptr) return absl::InvalidArgumentError("object database: no store given");
+  std::unique_ptr<ObjectDatabase> db(new ObjectDatabase(params, store));
+  // Which model holds which segment, from the store (a reopened database carries on).
+  for (int64_t id : store->modelIds()) {
+    OBJDB_ASSIGN_OR_RETURN(auto model, store->model(id));
+    for (const auto& o : model->observations) db->segment_model_[keyOf(o)] = id;
+  }
+  return db;
+}
+
+ObjectDatabase::ObjectDatabase(const Params& params, ModelStore* store)
+    : params_(params), store_(store) {}
+
+model::ModelBuildParams ObjectDatabase::buildParams() const {
+  model::ModelBuildParams p;
+  p.model = params_.model;
+  p.keypoints = params_.keypoints;
+  p.descriptors = params_.descriptors;
+  p.mesh_min_weight = params_.tsdf.mesh_min_weight;
+  return p;
+}
+
+StatusOr<model::ObjectModel> ObjectDatabase::buildFromObservations(
+    std::vector<model::Observation> observations, int64_t id) {
+  if (observations.empty()) return absl::InternalError("a model needs an observation");
+  std::optional<tsdf::TsdfLayer> grid;
+  std::vector<tsdf::VoxelIndex> voxels;
+  absl::flat_hash_set<uint64_t> seen;
+  for (const auto& o : observations) {
+    OBJDB_ASSIGN_OR_RETURN(auto segment, store_->rawSegment(keyOf(o)));
+    if (!grid) {
+      OBJDB_ASSIGN_OR_RETURN(tsdf::TsdfLayer empty,
+                             tsdf::TsdfLayer::create(segment->grid->voxelSize(),
+                                                     segment->grid->voxelsPerSide()));
+      grid.emplace(std::move(empty));
+    }
+    matching::mergeGrids(&*grid, *segment->grid, o.T_object_segment, params_.tsdf.max_weight);
+    const Eigen::Isometry3f T = o.T_object_segment.cast<float>();
+    for (const auto& v : segment->voxels) {
+      const tsdf::VoxelIndex mapped = grid->voxelIndexOf(T * segment->grid->voxelCenter(v));
+      if (seen.insert(packGridKey(mapped)).second) voxels.push_back(mapped);
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel model,
+                         model::buildModel(std::move(*grid), voxels, buildParams()));
+  model.id = id;
+  model.observations = std::move(observations);
+  return model;
+}
+
+Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_id) {
+  OBJDB_ASSIGN_OR_RETURN(auto held, store_->model(model_id));
+  std::vector<model::Observation> remaining;
+  for (const auto& o : held->observations) {
+    if (keyOf(o) != key) remaining.push_back(o);
+  }
+  if (remaining.empty()) {
+    OBJDB_RETURN_IF_ERROR(store_->removeModel(model_id));
+  } else {
+    // The model frame stays where it was (the observations are expressed in it), even when
+    // the segment that defined it leaves.
+    OBJDB_ASSIGN_OR_RETURN(model::ObjectModel rebuilt,
+                           buildFromObservations(std::move(remaining), model_id));
+    OBJDB_RETURN_IF_ERROR(store_->replaceModel(std::move(rebuilt), std::nullopt));
+  }
+  segment_model_.erase(key);
+  forget(model_id);
+  return absl::OkStatus();
+}
+
+void ObjectDatabase::forget(int64_t model_id) {
+  std::lock_guard lock(mutex_);
+  indices_.erase(model_id);
+  global_dirty_ = true;
+}
+
+std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
+    const model::ObjectModel& model) {
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = indices_.find(model.id);
+    if (it != indices_.end()) return it->second;
+  }
+  auto index = std::make_shared<const matching::DescriptorIndex>(model.descriptors);
+  std::lock_guard lock(mutex_);
+  return indices_.emplace(model.id, std::move(index)).first->second;
+}
+
+std::vector<int64_t> ObjectDatabase::candidatesFor(const model::ObjectModel& model) {
+  std::lock_guard lock(mutex_);
+  if (global_dirty_) {
+    std::vector<model::Fpfh> all;
+    global_owner_.clear();
+    for (int64_t id : store_->modelIds()) {
+      auto stored = store_->model(id);
+      if (!stored.ok() || !(*stored)->matchable(params_.model)) continue;
+      for (const auto& d : (*stored)->descriptors) {
+        all.push_back(d);
+        global_owner_.push_back(id);
+      }
+    }
+    global_ = std::make_unique<matching::DescriptorIndex>(all);
+    global_dirty_ = false;
+  }
+  std::map<int64_t, int> votes;
+  std::set<int64_t> voted;
+  for (const auto& d : model.descriptors) {
+    voted.clear();
+    for (const auto& [index, similarity] : global_->nearest(d, params_.database.prefilter_neighbours)) {
+      if (similarity < params_.matching.similarity_threshold) continue;
+      const int64_t owner = global_owner_[index];
+      if (owner != model.id && voted.insert(owner).second) ++votes[owner];
+    }
+  }
+  std::vector<std::pair<int, int64_t>> ranked;
+  for (const auto& [id, n] : votes) {
+    if (n >= params_.database.prefilter_min_votes) ranked.emplace_back(-n, id);
+  }
+  std::sort(ranked.begin(), ranked.end());
+  std::vector<int64_t> ids;
+  for (const auto& [negative_votes, id] : ranked) {
+    if (ids.size() >= size_t(params_.database.max_candidates)) break;
+    ids.push_back(id);
+  }
+  return ids;
+}
+
+CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
+                                         const model::ObjectModel& candidate,
+                                         InsertTimings* timings) {
+  CandidateResult result;
+  result.model_id = candidate.id;
+  auto t = Clock::now();
+  result.registration =
+      matching::registerModels(incoming, candidate, *indexOf(candidate), params_.matching);
+  timings->match_register_ms += msSince(t);
+  if (!result.registration.accepted) {
+    result.stage = "registration";
+    result.reason = result.registration.reason;
+    return result;
+  }
+  const Transform& T_j_i = result.registration.T_target_source;
+
+  // Model to model: t_i resampled into t_j's lattice.
+  t = Clock::now();
+  result.model_verdict = matching::judge(
+      matching::compareGrids(candidate.grid, incoming.grid, T_j_i), params_.merging,
+      candidate.grid.voxelSize());
+  timings->model_verify_ms += msSince(t);
+  if (!result.model_verdict.accepted) {
+    result.stage = "model";
+    result.reason = result.model_verdict.reason;
+    return result;
+  }
+
+  // Model to scene: the merged grid at every pose of both models, against that session's map.
+  t = Clock::now();
+  tsdf::TsdfLayer merged = candidate.grid.clone();
+  matching::mergeGrids(&merged, incoming.grid, T_j_i, params_.tsdf.max_weight);
+  std::vector<std::pair<std::string, Transform>> poses;
+  for (const auto& o : candidate.observations) poses.emplace_back(o.session, o.T_world_object);
+  const Transform T_i_j = T_j_i.inverse();
+  for (const auto& o : incoming.observations) {
+    poses.emplace_back(o.session, o.T_world_object * T_i_j);
+  }
+  for (const auto& [session, T_world_object] : poses) {
+    const auto scene = store_->scene(session);
+    if (scene == nullptr) {
+      ++result.scenes_missing;
+      continue;
+    }
+    const matching::Verdict verdict =
+        matching::judge(matching::compareGrids(merged, *scene, T_world_object.inverse()),
+                        params_.merging, merged.voxelSize());
+    if (!verdict.accepted) {
+      result.stage = "scene";
+      result.reason = absl::StrFormat("scene of session %s: %s", session, verdict.reason);
+      timings->scene_verify_ms += msSince(t);
+      return result;
+    }
+    ++result.scene_checks;
+  }
+  timings->scene_verify_ms += msSince(t);
+  result.accepted = true;
+  return result;
+}
+
+StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
+                                                     const gsm::RawSegment& segment) {
+  const auto start = Clock::now();
+  if (session.empty()) return absl::InvalidArgumentError("insert: the session name is empty");
+  OBJDB_RETURN_IF_ERROR(validateTransform(segment.T_world_segment, "raw segment pose"));
+  if (segment.label_voxels.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("insert: raw segment %s/%d has no voxels", session, segment.label));
+  }
+  InsertReport report;
+  const SegmentKey key{session, segment.label};
+  if (const auto it = segment_model_.find(key); it != segment_model_.end()) {
+    OBJDB_RETURN_IF_ERROR(removeContribution(key, it->second));
+    report.replaced_earlier = true;
+  }
+  RawSegmentRecord record;
+  record.key = key;
+  record.T_world_segment = segment.T_world_segment;
+  record.grid = std::make_shared<const tsdf::TsdfLayer>(segment.grid.clone());
+  record.voxels = segment.label_voxels;
+  record.extraction_frame = segment.extraction_frame;
+  OBJDB_RETURN_IF_ERROR(store_->putRawSegment(record));
+
+  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel incoming,
+                         model::buildModel(record.grid->clone(), record.voxels, buildParams()));
+  incoming.observations = {{session, segment.label, segment.T_world_segment, Transform::Identity()}};
+  report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
+  report.timings.keypoints_ms = incoming.timings.keypoints_ms;
+  report.timings.descriptors_ms = incoming.timings.descriptors_ms;
+  report.planar = incoming.planar;
+  report.matchable = incoming.matchable(params_.model);
+
+  std::vector<int64_t> candidates;
+  if (report.matchable) candidates = candidatesFor(incoming);
+  report.candidates = candidates.size();
+  report.results.resize(candidates.size());
+  std::vector<InsertTimings> per_candidate(candidates.size());
+  std::vector<std::shared_ptr<const model::ObjectModel>> loaded(candidates.size());
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    OBJDB_ASSIGN_OR_RETURN(loaded[c], store_->model(candidates[c]));
+  }
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t c = next++; c < candidates.size(); c = next++) {
+      report.results[c] = evaluate(incoming, *loaded[c], &per_candidate[c]);
+    }
+  };
+  const int threads = std::min<int>(params_.database.threads, int(candidates.size()));
+  if (threads <= 1) {
+    work();
+  } else {
+    std::vector<std::thread> pool;
+    for (int w = 0; w < threads; ++w) pool.emplace_back(work);
+    for (auto& thread : pool) thread.join();
+  }
+  for (const auto& t : per_candidate) {
+    report.timings.match_register_ms += t.match_register_ms;
+    report.timings.model_verify_ms += t.model_verify_ms;
+    report.timings.scene_verify_ms += t.scene_verify_ms;
+  }
+
+  // The accepted candidate with the lowest e_TSDF (ties: the older model).
+  const CandidateResult* best = nullptr;
+  for (const auto& r : report.results) {
+    if (!r.accepted) continue;
+    if (best == nullptr || r.model_verdict.agreement.rmse < best->model_verdict.agreement.rmse) {
+      best = &r;
+    }
+  }
+  if (best == nullptr) {
+    OBJDB_ASSIGN_OR_RETURN(report.model_id, store_->addModel(std::move(incoming)));
+    segment_model_[key] = report.model_id;
+    forget(report.model_id);
+  } else {
+    const size_t slot = size_t(best - report.results.data());
+    const model::ObjectModel& target = *loaded[slot];
+    const Transform& T_j_i = best->registration.T_target_source;
+    std::vector<model::Observation> observations = target.observations;
+    const Transform T_i_j = T_j_i.inverse();
+    for (const auto& o : incoming.observations) {
+      observations.push_back({o.session, o.label, o.T_world_object * T_i_j, T_j_i * o.T_object_segment});
+    }
+    OBJDB_ASSIGN_OR_RETURN(model::ObjectModel merged,
+                           buildFromObservations(std::move(observations), target.id));
+    MergeRecord merge;
+    merge.target = target.id;
+    merge.source = absl::StrFormat("segment %s/%d", session, segment.label);
+    merge.T_target_source = T_j_i;
+    merge.icp_rmse_m = best->registration.icp_rmse;
+    merge.tsdf_rmse_m = best->model_verdict.agreement.rmse;
+    merge.tsdf_overlap = best->model_verdict.agreement.overlap;
+    merge.scene_checks = best->scene_checks;
+    for (const auto& o : merged.observations) segment_model_[keyOf(o)] = target.id;
+    OBJDB_RETURN_IF_ERROR(store_->replaceModel(std::move(merged), merge));
+    forget(target.id);
+    report.model_id = target.id;
+    report.merged = true;
+    logger("database")->info("segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {})",
+                 session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m,
+                 merge.tsdf_overlap);
+  }
+  report.timings.total_ms = msSince(start);
+  return report;
+}
+
+}  // namespace objdb::database

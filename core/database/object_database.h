@@ -1,0 +1,90 @@
+// The incremental object database (paper §III-C, Algorithm 1): a raw segment becomes an object
+// model; a descriptor-vote prefilter picks candidate models; each candidate is registered
+// (matching + RANSAC + ICP), verified model to model on the TSDF grids, merged, and the merged
+// grid verified against the scene at every observed pose; the accepted candidate with the
+// lowest e_TSDF absorbs the new model, otherwise it is stored alone. Candidates are evaluated
+// in parallel; the outcome does not depend on the thread count.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/common/params.h"
+#include "core/common/status.h"
+#include "core/database/model_store.h"
+#include "core/gsm/gsm.h"
+#include "core/matching/registration.h"
+#include "core/matching/verification.h"
+#include "core/model/object_model.h"
+
+namespace objdb::database {
+
+// Why a candidate was not merged, or the numbers that let it merge.
+struct CandidateResult {
+  int64_t model_id = 0;
+  bool accepted = false;
+  std::string stage;   // where it stopped: "registration", "model", "scene", or "" if accepted
+  std::string reason;
+  matching::Registration registration;
+  matching::Verdict model_verdict;
+  size_t scene_checks = 0;     // poses verified against their scene
+  size_t scenes_missing = 0;   // poses whose session has no scene map (not checked)
+};
+
+// Per insert, ms (paper table II: P, K, D, MR, MV, SV).
+struct InsertTimings {
+  double cloud_ms = 0, keypoints_ms = 0, descriptors_ms = 0, match_register_ms = 0,
+         model_verify_ms = 0, scene_verify_ms = 0, total_ms = 0;
+};
+
+struct InsertReport {
+  int64_t model_id = 0;          // the model now holding the segment
+  bool merged = false;           // merged into an existing model
+  bool planar = false;
+  bool matchable = false;
+  bool replaced_earlier = false; // the segment's key had been inserted before
+  size_t candidates = 0;         // after the prefilter
+  std::vector<CandidateResult> results;  // one per candidate, in candidate order
+  InsertTimings timings;
+};
+
+class ObjectDatabase {
+ public:
+  // Params are validated. The store outlives the database.
+  static StatusOr<std::unique_ptr<ObjectDatabase>> create(const Params& params, ModelStore* store);
+
+  // Algorithm 1 for one raw segment of `session`. A segment whose (session, label) was inserted
+  // before replaces its earlier contribution (the model it went into is rebuilt without it).
+  StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment);
+
+  // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
+  std::vector<int64_t> candidatesFor(const model::ObjectModel& model);
+
+ private:
+  ObjectDatabase(const Params& params, ModelStore* store);
+  model::ModelBuildParams buildParams() const;
+  StatusOr<model::ObjectModel> buildFromObservations(std::vector<model::Observation> observations,
+                                                     int64_t id);
+  Status removeContribution(const SegmentKey& key, int64_t model_id);
+  CandidateResult evaluate(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
+                           InsertTimings* timings);
+  std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);
+  void forget(int64_t model_id);
+
+  Params params_;
+  ModelStore* store_;
+  std::mutex mutex_;  // guards the caches below
+  std::map<int64_t, std::shared_ptr<const matching::DescriptorIndex>> indices_;
+  std::map<SegmentKey, int64_t> segment_model_;  // which model holds each segment
+  // Global descriptor index for the prefilter: descriptors of every matchable model.
+  std::unique_ptr<matching::DescriptorIndex> global_;
+  std::vector<int64_t> global_owner_;
+  bool global_dirty_ = true;
+};
+
+}  // namespace objdb::database

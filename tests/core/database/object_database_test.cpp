@@ -1,0 +1,259 @@
+#include "core/database/object_database.h"
+
+#include <cmath>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "tests/support/sdf_grid.h"
+
+namespace objdb::database {
+namespace {
+
+using objdb::testing::boxSdf;
+using objdb::testing::cylinderSdf;
+using objdb::testing::Sdf;
+using objdb::testing::sdfGrid;
+using objdb::testing::sphereSdf;
+using objdb::testing::unionSdf;
+using ::testing::HasSubstr;
+
+constexpr float kVoxel = 0.02f;
+constexpr float kBand = 3 * kVoxel;
+
+// Shapes in their own frame, standing on z = 0.
+Sdf boxWithBall() {
+  return unionSdf({boxSdf({0, 0, 0.1f}, {0.2f, 0.12f, 0.1f}), sphereSdf({0.03f, 0.08f, 0.22f}, 0.07f),
+                   boxSdf({-0.04f, -0.16f, 0.06f}, {0.06f, 0.05f, 0.06f})});
+}
+Sdf chair() {
+  std::vector<Sdf> parts = {boxSdf({0, 0, 0.45f}, {0.22f, 0.22f, 0.03f}),       // seat
+                            boxSdf({0, -0.2f, 0.75f}, {0.22f, 0.03f, 0.28f})};  // back
+  for (int i = 0; i < 4; ++i) {
+    parts.push_back(boxSdf({(i & 1) ? 0.18f : -0.18f, (i & 2) ? 0.18f : -0.18f, 0.21f},
+                           {0.03f, 0.03f, 0.21f}));
+  }
+  return unionSdf(parts);
+}
+Sdf extinguisher() {
+  return unionSdf({cylinderSdf({0, 0, 0.3f}, 0.09f, 0.3f), sphereSdf({0, 0, 0.6f}, 0.09f),
+                   boxSdf({0.1f, 0, 0.62f}, {0.06f, 0.02f, 0.02f})});
+}
+
+Transform pose(double x, double y, double yaw) {
+  return Transform(Eigen::Translation3d(x, y, 0)) *
+         Transform(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
+}
+
+struct World {
+  Sdf shape;
+  Transform T_world_object;
+};
+
+// The world TSDF of a scene (every shape, all sides observed) and a raw segment of one shape:
+// its voxels with object-frame x in [x_min, x_max], in a grid that holds the whole scene band
+// (the GSM hands over the label's voxels plus a margin).
+tsdf::TsdfLayer sceneGrid(const std::vector<World>& shapes) {
+  std::vector<Sdf> placed;
+  for (const auto& s : shapes) {
+    placed.push_back(objdb::testing::transformedSdf(s.shape, s.T_world_object.cast<float>()));
+  }
+  return sdfGrid(unionSdf(placed), Eigen::Vector3f(-2, -2, -0.2f), Eigen::Vector3f(2, 2, 1.2f),
+                 kVoxel, kBand)
+      .layer;
+}
+
+gsm::RawSegment segment(uint32_t label, const World& w, float x_min = -10, float x_max = 10) {
+  const Eigen::Isometry3f T = w.T_world_object.cast<float>();
+  auto grid = sdfGrid(objdb::testing::transformedSdf(w.shape, T), Eigen::Vector3f(-2, -2, -0.2f),
+                      Eigen::Vector3f(2, 2, 1.2f), kVoxel, kBand);
+  gsm::RawSegment raw{label, Transform::Identity(), std::move(grid.layer), {}, 0, 0};
+  for (const auto& v : grid.surface_voxels) {
+    const Eigen::Vector3f p = T.inverse() * raw.grid.voxelCenter(v);
+    if (p.x() >= x_min && p.x() <= x_max && p.z() > 0.01f) raw.label_voxels.push_back(v);
+  }
+  return raw;
+}
+
+Params params(int threads = 2) {
+  Params p;
+  p.tsdf.voxel_size_m = kVoxel;
+  p.database.threads = threads;
+  return p;
+}
+
+struct Fixture {
+  InMemoryModelStore store;
+  std::unique_ptr<ObjectDatabase> db;
+  explicit Fixture(const Params& p = params()) { db = ObjectDatabase::create(p, &store).value(); }
+};
+
+// The same object on Monday and on Tuesday, elsewhere and turned; each scene map holds it.
+const World kMonday{boxWithBall(), pose(0.3, -0.2, 0.3)};
+const World kTuesday{boxWithBall(), pose(-0.5, 0.4, 2.0)};
+void addScenes(InMemoryModelStore* store) {
+  store->setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday})));
+  store->setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday})));
+}
+
+TEST(ObjectDatabase, TwoPartialViewsInTwoSessionsBecomeOneModelWithBothPoses) {
+  Fixture f;
+  const World& a = kMonday;
+  const World& b = kTuesday;
+  addScenes(&f.store);
+  auto first = f.db->insertSegment("monday", segment(7, a, -0.3f, 0.1f));
+  ASSERT_TRUE(first.ok()) << first.status();
+  EXPECT_FALSE(first->merged);
+  EXPECT_TRUE(first->matchable);
+  auto second = f.db->insertSegment("tuesday", segment(3, b, -0.1f, 0.3f));
+  ASSERT_TRUE(second.ok()) << second.status();
+  ASSERT_EQ(second->candidates, 1u);
+  const CandidateResult& r = second->results[0];
+  ASSERT_TRUE(second->merged) << r.stage << ": " << r.reason;
+  EXPECT_EQ(second->model_id, first->model_id);
+  EXPECT_EQ(r.scene_checks, 2u);
+  ASSERT_EQ(f.store.modelIds().size(), 1u);
+  auto model = f.store.model(first->model_id).value();
+  ASSERT_EQ(model->observations.size(), 2u);
+  // The model frame is monday's world (the first segment's frame); on tuesday it sat at
+  // T_world_b · T_a_world.
+  const Transform truth = b.T_world_object * a.T_world_object.inverse();
+  const Transform error = truth.inverse() * model->observations[1].T_world_object;
+  EXPECT_LT(error.translation().norm(), 0.02);
+  EXPECT_LT(Eigen::AngleAxisd(error.rotation()).angle() * 180 / M_PI, 3.0);
+  // The merged model holds both ends: each view saw 75 % of the box's length, together all of it.
+  auto lone = model::buildModel(segment(7, a, -0.3f, 0.1f).grid.clone(),
+                                segment(7, a, -0.3f, 0.1f).label_voxels, model::ModelBuildParams{});
+  EXPECT_GT(model->surface_voxels.size(), lone->surface_voxels.size() * 5 / 4);
+  EXPECT_GT(model->cloud.points.size(), lone->cloud.points.size() * 23 / 20);
+  const auto merges = f.store.mergeRecords();
+  ASSERT_EQ(merges.size(), 1u);
+  EXPECT_EQ(merges[0].target, first->model_id);
+  EXPECT_LE(merges[0].tsdf_rmse_m, 0.02);
+}
+
+TEST(ObjectDatabase, AChairAndAFireExtinguisherAreNeverMerged) {
+  Fixture f;
+  const World c{chair(), pose(0, 0, 0.2)};
+  const World e{extinguisher(), pose(1.0, 0.5, 1.0)};
+  f.store.setScene("s", std::make_shared<tsdf::TsdfLayer>(sceneGrid({c, e})));
+  ASSERT_TRUE(f.db->insertSegment("s", segment(1, c)).ok());
+  auto r = f.db->insertSegment("s", segment(2, e));
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_FALSE(r->merged);
+  EXPECT_EQ(f.store.modelIds().size(), 2u);
+  for (const auto& c : r->results) EXPECT_FALSE(c.accepted) << c.model_id;
+}
+
+TEST(ObjectDatabase, PlanarSegmentsAreStoredButNeverMatched) {
+  Fixture f;
+  const Sdf floor = boxSdf({0, 0, -0.05f}, {0.5f, 0.5f, 0.05f});
+  auto slab = [&](uint32_t label) {
+    auto grid = sdfGrid(floor, Eigen::Vector3f(-0.6f, -0.6f, -0.2f), Eigen::Vector3f(0.6f, 0.6f, 0.2f),
+                        kVoxel, kBand);
+    gsm::RawSegment raw{label, Transform::Identity(), std::move(grid.layer), {}, 0, 0};
+    for (const auto& v : grid.surface_voxels) {
+      const Eigen::Vector3f p = raw.grid.voxelCenter(v);
+      if (p.z() > -0.01f && p.head<2>().cwiseAbs().maxCoeff() < 0.45f) raw.label_voxels.push_back(v);
+    }
+    return raw;
+  };
+  auto a = f.db->insertSegment("s", slab(1));
+  auto b = f.db->insertSegment("t", slab(1));
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_TRUE(a->planar);
+  EXPECT_FALSE(a->matchable);
+  EXPECT_EQ(b->candidates, 0u);
+  EXPECT_FALSE(b->merged);
+  EXPECT_EQ(f.store.modelIds().size(), 2u);
+}
+
+TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
+  Fixture f;
+  const World& a = kMonday;
+  const World& b = kTuesday;
+  addScenes(&f.store);
+  ASSERT_TRUE(f.db->insertSegment("monday", segment(7, a, -0.3f, 0.1f)).ok());
+  ASSERT_TRUE(f.db->insertSegment("tuesday", segment(3, b, -0.1f, 0.3f)).ok());
+  // Tuesday's label 3 grows and is extracted again: it replaces its contribution.
+  auto again = f.db->insertSegment("tuesday", segment(3, b, -0.2f, 0.3f));
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_TRUE(again->replaced_earlier);
+  EXPECT_TRUE(again->merged);
+  ASSERT_EQ(f.store.modelIds().size(), 1u);
+  EXPECT_EQ(f.store.model(f.store.modelIds()[0]).value()->observations.size(), 2u);
+  EXPECT_EQ(f.store.rawSegment({"tuesday", 3}).value()->voxels.size(),
+            segment(3, b, -0.2f, 0.3f).label_voxels.size());
+  // A lone segment re-extracted: its model is replaced, not duplicated.
+  const World e{extinguisher(), pose(1.0, 0.5, 1.0)};
+  ASSERT_TRUE(f.db->insertSegment("monday", segment(9, e)).ok());
+  ASSERT_TRUE(f.db->insertSegment("monday", segment(9, e)).ok());
+  EXPECT_EQ(f.store.modelIds().size(), 2u);
+}
+
+TEST(ObjectDatabase, TheSceneVetoesAMergeItContradicts) {
+  Fixture f;
+  const World& a = kMonday;
+  const World& b = kTuesday;
+  f.store.setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({a})));
+  // Tuesday's map says: free space all around where the object would be.
+  const Sdf empty = [](const Eigen::Vector3f&) { return kBand; };
+  f.store.setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(
+                                  sdfGrid(empty, Eigen::Vector3f(-1.2f, -0.4f, 0.0f),
+                                          Eigen::Vector3f(0.2f, 1.2f, 0.5f), kVoxel, kBand)
+                                      .layer));
+  ASSERT_TRUE(f.db->insertSegment("monday", segment(7, a, -0.3f, 0.1f)).ok());
+  auto r = f.db->insertSegment("tuesday", segment(3, b, -0.1f, 0.3f));
+  ASSERT_TRUE(r.ok());
+  ASSERT_EQ(r->results.size(), 1u);
+  EXPECT_FALSE(r->merged);
+  EXPECT_EQ(r->results[0].stage, "scene");
+  EXPECT_THAT(r->results[0].reason, HasSubstr("session tuesday"));
+  EXPECT_EQ(f.store.modelIds().size(), 2u);
+}
+
+TEST(ObjectDatabase, OneOrTwoThreadsGiveTheSameDatabase) {
+  auto run = [](int threads) {
+    Fixture f(params(threads));
+    const World a{boxWithBall(), pose(0.3, -0.2, 0.3)};
+    const World b{boxWithBall(), pose(-0.5, 0.4, 2.0)};
+    const World c{chair(), pose(1.0, 1.0, 0.0)};
+    f.store.setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({a, c})));
+    f.store.setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({b})));
+    f.db->insertSegment("monday", segment(1, a, -0.3f, 0.1f)).value();
+    f.db->insertSegment("monday", segment(2, c)).value();
+    f.db->insertSegment("tuesday", segment(1, b, -0.1f, 0.3f)).value();
+    std::vector<std::pair<int64_t, std::vector<Eigen::Matrix4d>>> out;
+    for (int64_t id : f.store.modelIds()) {
+      std::vector<Eigen::Matrix4d> poses;
+      for (const auto& o : f.store.model(id).value()->observations) {
+        poses.push_back(o.T_world_object.matrix());
+      }
+      out.emplace_back(id, poses);
+    }
+    return out;
+  };
+  EXPECT_EQ(run(1), run(2));
+}
+
+TEST(ObjectDatabase, BadInputIsAClearError) {
+  Fixture f;
+  const World a{boxWithBall(), pose(0, 0, 0)};
+  EXPECT_THAT(std::string(f.db->insertSegment("", segment(1, a)).status().message()),
+              HasSubstr("session name is empty"));
+  gsm::RawSegment nan_pose = segment(1, a);
+  nan_pose.T_world_segment.translation().x() = NAN;
+  EXPECT_EQ(f.db->insertSegment("s", nan_pose).status().code(), absl::StatusCode::kInvalidArgument);
+  gsm::RawSegment empty = segment(1, a);
+  empty.label_voxels.clear();
+  EXPECT_THAT(std::string(f.db->insertSegment("s", empty).status().message()),
+              HasSubstr("has no voxels"));
+  EXPECT_TRUE(f.store.modelIds().empty());
+  Params bad = params();
+  bad.database.threads = 0;
+  EXPECT_THAT(std::string(ObjectDatabase::create(bad, &f.store).status().message()),
+              HasSubstr("database.threads"));
+}
+
+}  // namespace
+}  // namespace objdb::database
