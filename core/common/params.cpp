@@ -97,6 +97,9 @@ Status MatchingParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(ransac_min_inliers, 3, 100000, "matching.ransac_min_inliers"));
   OBJDB_RETURN_IF_ERROR(
       positive(icp_max_correspondence_m, "matching.icp_max_correspondence_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(coarse_min_agreement, -1.0, 1.0, "matching.coarse_min_agreement"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(icp_max_source_points, 10, 10000000, "matching.icp_max_source_points"));
   return inRange(icp_iterations, 1, 10000, "matching.icp_iterations");
 }
 

@@ -96,8 +96,12 @@ struct MatchingParams {
   float ransac_inlier_distance_m = 0.03f;  // a match agrees with a transform within this
   int ransac_iterations = 10000;
   int ransac_min_inliers = 4;              // fewer: no consistent set, candidate rejected
+  // The coarse transform must not be contradicted by the target's TSDF: (agreeing − disagreeing)
+  // source surface points / sampled points ≥ this, or the candidate is rejected before ICP.
+  float coarse_min_agreement = 0.0f;
   float icp_max_correspondence_m = 0.05f;  // ICP pairs farther apart are ignored
   int icp_iterations = 30;
+  int icp_max_source_points = 1500;        // the source cloud is thinned to this for ICP
   Status validate() const;
 };
 

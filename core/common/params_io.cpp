@@ -77,6 +77,8 @@ void forEachField(MatchingParams& p, Fn&& fn) {
   fn("ransac_min_inliers", p.ransac_min_inliers);
   fn("icp_max_correspondence_m", p.icp_max_correspondence_m);
   fn("icp_iterations", p.icp_iterations);
+  fn("coarse_min_agreement", p.coarse_min_agreement);
+  fn("icp_max_source_points", p.icp_max_source_points);
 }
 template <typename Fn>
 void forEachField(MergingParams& p, Fn&& fn) {

@@ -9,6 +9,7 @@
 
 #include <Eigen/Geometry>
 
+#include <pcl/console/print.h>
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
@@ -31,10 +32,11 @@ double norm(const model::Fpfh& a) {
   return std::sqrt(s);
 }
 
-pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const PointCloud& cloud) {
+// Every `stride`-th point with its normal.
+pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const PointCloud& cloud, size_t stride = 1) {
   auto out = std::make_shared<pcl::PointCloud<pcl::PointNormal>>();
-  out->reserve(cloud.points.size());
-  for (size_t i = 0; i < cloud.points.size(); ++i) {
+  out->reserve(cloud.points.size() / stride + 1);
+  for (size_t i = 0; i < cloud.points.size(); i += stride) {
     pcl::PointNormal p;
     p.getVector3fMap() = cloud.points[i];
     p.getNormalVector3fMap() = cloud.normals[i];
@@ -213,6 +215,12 @@ CoarseAlignment estimateCoarseAlignment(const std::vector<Eigen::Vector3f>& from
 
 Registration registerModels(const model::ObjectModel& source, const model::ObjectModel& target,
                             const DescriptorIndex& target_index, const MatchingParams& params) {
+  // PCL prints to stderr when ICP finds too few pairs; that outcome is reported in `reason`.
+  static const bool quiet = [] {
+    pcl::console::setVerbosityLevel(pcl::console::L_ERROR);
+    return true;
+  }();
+  (void)quiet;
   Registration r;
   auto t = Clock::now();
   const std::vector<DescriptorMatch> matches =
@@ -242,16 +250,30 @@ Registration registerModels(const model::ObjectModel& source, const model::Objec
     return r;
   }
   r.T_coarse = coarse.T_target_source;
+  r.coarse_agreement = coarse.fitness;
+  if (!(coarse.fitness >= double(params.coarse_min_agreement))) {
+    r.reason = absl::StrFormat(
+        "coarse alignment: the target grid disagrees (agreement %.2f < %.2f)", coarse.fitness,
+        params.coarse_min_agreement);
+    return r;
+  }
 
   // Point-to-plane ICP from the coarse transform.
   t = Clock::now();
   pcl::IterativeClosestPointWithNormals<pcl::PointNormal, pcl::PointNormal> icp;
-  icp.setInputSource(withNormals(source.cloud));
+  // ICP moves the source: a thinned source (at most icp_max_source_points) against the full
+  // target keeps its cost bounded without losing the target's detail.
+  icp.setInputSource(withNormals(
+      source.cloud, std::max<size_t>(1, (source.cloud.points.size() +
+                                         size_t(params.icp_max_source_points) - 1) /
+                                            size_t(params.icp_max_source_points))));
   icp.setInputTarget(withNormals(target.cloud));
   icp.setMaxCorrespondenceDistance(params.icp_max_correspondence_m);
   icp.setMaximumIterations(params.icp_iterations);
+  // Converged when an iteration moves the source by less than 0.1 mm (PCL compares the squared
+  // translation with the epsilon) and turns it by less than its default rotation threshold.
   icp.setTransformationEpsilon(1e-8);
-  icp.setEuclideanFitnessEpsilon(1e-8);
+  icp.setEuclideanFitnessEpsilon(1e-9);
   pcl::PointCloud<pcl::PointNormal> aligned;
   icp.align(aligned, r.T_coarse.matrix().cast<float>());
   r.icp_ms = msSince(t);

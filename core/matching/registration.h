@@ -76,6 +76,7 @@ struct Registration {
   Transform T_coarse = Transform::Identity();
   size_t matches = 0, inliers = 0;                      // descriptor matches, RANSAC inliers
   size_t hypotheses = 0;                                // RANSAC samples with enough support
+  double coarse_agreement = 0.0;                        // CoarseAlignment::fitness
   double icp_rmse = 0.0;   // e_ICP: point-to-plane RMSE over the final pairs, metres
   size_t icp_pairs = 0;    // source points paired within the ICP correspondence distance
   double match_ms = 0, ransac_ms = 0, icp_ms = 0;
