@@ -19,6 +19,7 @@
 #include <opencv2/core.hpp>
 
 #include "absl/strings/str_format.h"
+#include "bench/bench_util.h"
 #include "core/common/grid_key.h"
 #include "core/common/params_io.h"
 #include "core/database/object_database.h"
@@ -45,9 +46,7 @@ struct SegmentTruth {
 
 int main(int argc, char** argv) {
   using namespace objdb;
-  mallopt(M_MMAP_THRESHOLD, 256 << 20);
-  mallopt(M_TRIM_THRESHOLD, 512 << 20);
-  cv::setNumThreads(1);
+  bench::setUpBenchmarkProcess();
   std::string camera = "tango";
   int per_session = 300, sessions = 3;
   Params params;
@@ -113,18 +112,10 @@ int main(int argc, char** argv) {
       const auto seg = segmenter.segment(f.depth).value();
       (void)map.integrate(f.depth, seg.labels, f.T_world_camera).value();
       for (auto& s : map.extractIdle()) extracted.insert_or_assign(s.label, std::move(s));
-      const Eigen::Isometry3f T = f.T_world_camera.cast<float>();
-      const Intrinsics& k = scene.intrinsics;
-      for (int v = 0; v < k.height; ++v) {
-        for (int u = 0; u < k.width; ++u) {
-          const float z = f.depth.at(u, v);
-          const uint16_t id = f.instances->at(u, v);
-          if (!isValidDepth(z) || id == 0 || z > params.tsdf.max_ray_length_m) continue;
-          const Eigen::Vector3f p =
-              T * Eigen::Vector3f(float((u - k.cx) * z / k.fx), float((v - k.cy) * z / k.fy), z);
-          ++truth[packGridKey(map.tsdf().voxelIndexOf(p))][id];
-        }
-      }
+      bench::forEachInstancePoint(f, scene.intrinsics, params.tsdf.max_ray_length_m,
+                                  [&](const Eigen::Vector3f& p, uint16_t id) {
+                                    ++truth[packGridKey(map.tsdf().voxelIndexOf(p))][id];
+                                  });
     }
     for (auto& s : map.extractIdle(true)) extracted.insert_or_assign(s.label, std::move(s));
     gsm_seconds += secondsSince(t_gsm);

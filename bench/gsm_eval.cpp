@@ -18,6 +18,7 @@
 #include <opencv2/core.hpp>
 
 #include "absl/strings/str_format.h"
+#include "bench/bench_util.h"
 #include "core/common/grid_key.h"
 #include "core/common/mesh_distance.h"
 #include "core/common/params_io.h"
@@ -35,9 +36,7 @@ double msSince(std::chrono::steady_clock::time_point t) {
 
 int main(int argc, char** argv) {
   using namespace objdb;
-  mallopt(M_MMAP_THRESHOLD, 256 << 20);
-  mallopt(M_TRIM_THRESHOLD, 512 << 20);
-  cv::setNumThreads(1);
+  bench::setUpBenchmarkProcess();
   std::string camera = "vga";
   float voxel = 0.02f;
   int per_session = 100, sessions = 1;
@@ -132,18 +131,10 @@ int main(int argc, char** argv) {
       gsm_ms += msSince(t);
       merges += r.merges;
       ++frames;
-      const Eigen::Isometry3f T = f.T_world_camera.cast<float>();
-      const Intrinsics& k = scene.intrinsics;
-      for (int v = 0; v < k.height; ++v) {
-        for (int u = 0; u < k.width; ++u) {
-          const float z = f.depth.at(u, v);
-          const uint16_t id = f.instances->at(u, v);
-          if (!isValidDepth(z) || id == 0 || z > tsdf.max_ray_length_m) continue;
-          const Eigen::Vector3f p = T * Eigen::Vector3f(float((u - k.cx) * z / k.fx), float((v - k.cy) * z / k.fy), z);
-          const tsdf::VoxelIndex x = map.tsdf().voxelIndexOf(p);
-          truth[packGridKey(x)].vote(id);
-        }
-      }
+      bench::forEachInstancePoint(f, scene.intrinsics, tsdf.max_ray_length_m,
+                                  [&](const Eigen::Vector3f& p, uint16_t id) {
+                                    truth[packGridKey(map.tsdf().voxelIndexOf(p))].vote(id);
+                                  });
     }
     // Throughput on two cores: segmentation of frame k+1 overlaps GSM fusion of frame k
     // (DESIGN.md, Threads). Frames are rendered beforehand so only the pipeline is timed.

@@ -13,6 +13,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "bench/bench_util.h"
 #include "core/common/params_io.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "core/segmentation/quality.h"
@@ -127,9 +128,7 @@ int main(int argc, char** argv) {
   // Keep freed frame buffers in the heap instead of returning them to the kernel: a long-running
   // server reaches this steady state by itself; a short benchmark would otherwise time page
   // faults of fresh memory every frame.
-  mallopt(M_MMAP_THRESHOLD, 256 << 20);
-  mallopt(M_TRIM_THRESHOLD, 512 << 20);
-  cv::setNumThreads(1);  // one-thread figures mean one thread, OpenCV's pool included
+  bench::setUpBenchmarkProcess();
   int per_session = 30, threads = 2;
   std::string cameras = "both";
   Params params;

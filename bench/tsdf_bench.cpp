@@ -10,14 +10,14 @@
 #include <string>
 #include <vector>
 
+#include "bench/bench_util.h"
 #include "core/sim/generator.h"
 #include "core/sim/lounge.h"
 #include "core/tsdf/tsdf_integrator.h"
 
 int main(int argc, char** argv) {
   using namespace objdb;
-  mallopt(M_MMAP_THRESHOLD, 256 << 20);
-  mallopt(M_TRIM_THRESHOLD, 512 << 20);
+  bench::setUpBenchmarkProcess();
   int frames = 100;
   for (int i = 1; i < argc; ++i) {
     if (std::string(argv[i]) == "--frames" && i + 1 < argc) {
