@@ -24,6 +24,20 @@ bool ObjectModel::matchable(const ModelParams& params) const {
          keypoint_indices.size() >= 3 && descriptors.size() == keypoint_indices.size();
 }
 
+ObjectModel cloneModel(const ObjectModel& model) {
+  ObjectModel copy(model.grid.clone());
+  copy.id = model.id;
+  copy.observations = model.observations;
+  copy.surface_voxels = model.surface_voxels;
+  copy.cloud = model.cloud;
+  copy.keypoint_indices = model.keypoint_indices;
+  copy.descriptors = model.descriptors;
+  copy.planar = model.planar;
+  copy.plane_inlier_ratio = model.plane_inlier_ratio;
+  copy.timings = model.timings;
+  return copy;
+}
+
 StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
                                   const std::vector<tsdf::VoxelIndex>& voxels, float min_weight) {
   if (voxels.empty()) return absl::InvalidArgumentError("surface cloud: the segment has no voxels");

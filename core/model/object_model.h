@@ -58,6 +58,9 @@ struct ObjectModel {
   Eigen::Vector3f keypoint(size_t k) const { return cloud.points[keypoint_indices[k]]; }
 };
 
+// A deep copy (models are move-only: their grid owns its blocks).
+ObjectModel cloneModel(const ObjectModel& model);
+
 // Marching-tetrahedra surface of `grid` restricted to `voxels` (vertices whose cell touches one
 // of them), with area-weighted normals pointing out of the object (toward positive distance).
 // Cells with a corner lighter than min_weight are skipped. Errors: no voxels given.
