@@ -99,6 +99,9 @@ int main(int argc, char** argv) {
   size_t raw_segments = 0, mergeable = 0, planar = 0, skipped = 0;
   std::map<std::string, size_t> stages;  // candidate outcomes: stage where each stopped
   double match_ms = 0, ransac_ms = 0, icp_ms = 0;
+  // Prefilter recall: stored models holding a segment of the incoming segment's kind, and how
+  // many of them the prefilter kept.
+  size_t relevant_models = 0, relevant_kept = 0, inserts_with_relevant = 0, inserts_hit = 0;
   double gsm_seconds = 0.0;
   const auto start = Clock::now();
   std::printf("Object database on the synthetic lounge (%s, %d frames per session, %.0f mm "
@@ -166,6 +169,19 @@ int main(int argc, char** argv) {
       const database::SegmentKey key{scene.name, label};
       truth_of[key] = t;
       ++raw_segments;
+      std::set<int64_t> relevant;
+      if (t.kind != "structure" && t.kind != "unknown") {
+        for (int64_t id : store.modelIds()) {
+          const auto m = store.model(id).value();
+          if (!m->matchable(params.model)) continue;
+          for (const auto& o : m->observations) {
+            if (truth_of[{o.session, o.label}].kind == t.kind) {
+              relevant.insert(id);
+              break;
+            }
+          }
+        }
+      }
       last_session.emplace_back(scene.name, gsm::RawSegment{segment.label, segment.T_world_segment,
                                                            segment.grid.clone(),
                                                            segment.label_voxels,
@@ -177,6 +193,14 @@ int main(int argc, char** argv) {
                      std::string(report.status().message()).c_str());
         ++skipped;
         continue;
+      }
+      if (report->matchable && !relevant.empty()) {
+        size_t kept = 0;
+        for (const auto& c : report->results) kept += relevant.count(c.model_id);
+        relevant_models += relevant.size();
+        relevant_kept += kept;
+        ++inserts_with_relevant;
+        inserts_hit += kept > 0 ? 1 : 0;
       }
       for (const auto& c : report->results) {
         match_ms += c.registration.match_ms;
@@ -266,6 +290,10 @@ int main(int argc, char** argv) {
   std::printf("\ncandidates evaluated: %zu (%.1f per mergeable insert); outcome:", evaluated,
               mergeable ? double(evaluated) / double(mergeable) : 0.0);
   for (const auto& [stage, n] : stages) std::printf(" %s %zu", stage.c_str(), n);
+  std::printf("prefilter recall: %.0f %% of the stored models of the same kind kept as "
+              "candidates (%zu of %zu); %zu of %zu inserts kept at least one\n",
+              relevant_models ? 100.0 * relevant_kept / relevant_models : 0.0, relevant_kept,
+              relevant_models, inserts_hit, inserts_with_relevant);
   std::printf("\nMR split, seconds: descriptor matching %.1f, RANSAC %.1f, ICP %.1f\n",
               match_ms / 1000, ransac_ms / 1000, icp_ms / 1000);
   std::printf("\nTime of the database stage, seconds (paper table II; one insert at a time, "

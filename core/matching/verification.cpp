@@ -63,15 +63,18 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 }
 
 size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
-                  const Transform& T_target_source, float max_weight) {
+                  const Transform& T_target_source, float max_weight, MergeMode mode,
+                  size_t* written_near_surface) {
   const Eigen::Isometry3f T_source_target = T_target_source.inverse().cast<float>();
   const Eigen::Isometry3f T_ts = T_target_source.cast<float>();
   // Target voxels to write: the observed ones, and those around every observed source voxel.
   std::vector<tsdf::VoxelIndex> candidates;
   absl::flat_hash_set<uint64_t> seen;
-  forEachObserved(*target, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) {
-    if (seen.insert(packGridKey(v)).second) candidates.push_back(v);
-  });
+  if (mode == MergeMode::kFuse) {
+    forEachObserved(*target, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) {
+      if (seen.insert(packGridKey(v)).second) candidates.push_back(v);
+    });
+  }
   const float inv = 1.0f / target->voxelSize();
   forEachObserved(source, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) {
     const Eigen::Vector3f p = T_ts * source.voxelCenter(v);
@@ -89,13 +92,20 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
   };
   std::vector<Write> writes;
   for (const tsdf::VoxelIndex& v : candidates) {
+    const tsdf::TsdfVoxel* t = target->voxel(v);
+    if (mode == MergeMode::kFillUnobserved && t && t->weight > 0.0f) continue;
     float ds = 0.0f, ws = 0.0f;
     if (!source.interpolate(T_source_target * target->voxelCenter(v), &ds, &ws)) continue;
-    const tsdf::TsdfVoxel* t = target->voxel(v);
     const float wt = t ? t->weight : 0.0f;
     const float dt = t ? t->distance : 0.0f;
     const float w = wt + ws;
     writes.push_back({v, (wt * dt + ws * ds) / w, std::min(w, max_weight)});
+  }
+  if (written_near_surface) {
+    *written_near_surface = 0;
+    for (const Write& w : writes) {
+      *written_near_surface += std::abs(w.distance) <= target->voxelSize() ? 1 : 0;
+    }
   }
   for (const Write& w : writes) {
     target->allocateBlock(target->blockOfVoxel(w.index));

@@ -37,8 +37,15 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 // t̂ = target ⊕ source: `source` resampled into target's lattice (T_target_source maps source into
 // target) and fused by weight: d = (w_t d_t + w_s d_s) / (w_t + w_s), w = min(w_t + w_s,
 // max_weight). Voxels only the source observed are added. Grids must share the voxel size.
-// Returns the number of target voxels written.
+// kFillUnobserved (scene completion) leaves every observed target voxel as it is. Returns the
+// number of target voxels written; `written_near_surface` gets those within one voxel of the
+// surface (|distance| ≤ voxel size).
+enum class MergeMode {
+  kFuse,            // weighted average where both observed, source values where only it did
+  kFillUnobserved,  // only voxels the target never observed get the source's values
+};
 size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
-                  const Transform& T_target_source, float max_weight);
+                  const Transform& T_target_source, float max_weight,
+                  MergeMode mode = MergeMode::kFuse, size_t* written_near_surface = nullptr);
 
 }  // namespace objdb::matching

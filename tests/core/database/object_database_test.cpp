@@ -5,74 +5,32 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "tests/support/sdf_grid.h"
+#include "tests/support/object_scenes.h"
 
 namespace objdb::database {
 namespace {
 
 using objdb::testing::boxSdf;
-using objdb::testing::cylinderSdf;
 using objdb::testing::Sdf;
 using objdb::testing::sdfGrid;
-using objdb::testing::sphereSdf;
-using objdb::testing::unionSdf;
 using ::testing::HasSubstr;
 
-constexpr float kVoxel = 0.02f;
-constexpr float kBand = 3 * kVoxel;
+using objdb::testing::boxWithBall;
+using objdb::testing::chair;
+using objdb::testing::extinguisher;
+using objdb::testing::kSceneBand;
+using objdb::testing::kSceneVoxel;
+using objdb::testing::sceneGrid;
+using objdb::testing::View;
+using World = objdb::testing::PlacedShape;
 
-// Shapes in their own frame, standing on z = 0.
-Sdf boxWithBall() {
-  return unionSdf({boxSdf({0, 0, 0.1f}, {0.2f, 0.12f, 0.1f}), sphereSdf({0.03f, 0.08f, 0.22f}, 0.07f),
-                   boxSdf({-0.04f, -0.16f, 0.06f}, {0.06f, 0.05f, 0.06f})});
-}
-Sdf chair() {
-  std::vector<Sdf> parts = {boxSdf({0, 0, 0.45f}, {0.22f, 0.22f, 0.03f}),       // seat
-                            boxSdf({0, -0.2f, 0.75f}, {0.22f, 0.03f, 0.28f})};  // back
-  for (int i = 0; i < 4; ++i) {
-    parts.push_back(boxSdf({(i & 1) ? 0.18f : -0.18f, (i & 2) ? 0.18f : -0.18f, 0.21f},
-                           {0.03f, 0.03f, 0.21f}));
-  }
-  return unionSdf(parts);
-}
-Sdf extinguisher() {
-  return unionSdf({cylinderSdf({0, 0, 0.3f}, 0.09f, 0.3f), sphereSdf({0, 0, 0.6f}, 0.09f),
-                   boxSdf({0.1f, 0, 0.62f}, {0.06f, 0.02f, 0.02f})});
-}
+constexpr float kVoxel = kSceneVoxel;
+constexpr float kBand = kSceneBand;
 
-Transform pose(double x, double y, double yaw) {
-  return Transform(Eigen::Translation3d(x, y, 0)) *
-         Transform(Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()));
-}
-
-struct World {
-  Sdf shape;
-  Transform T_world_object;
-};
-
-// The world TSDF of a scene (every shape, all sides observed) and a raw segment of one shape:
-// its voxels with object-frame x in [x_min, x_max], in a grid that holds the whole scene band
-// (the GSM hands over the label's voxels plus a margin).
-tsdf::TsdfLayer sceneGrid(const std::vector<World>& shapes) {
-  std::vector<Sdf> placed;
-  for (const auto& s : shapes) {
-    placed.push_back(objdb::testing::transformedSdf(s.shape, s.T_world_object.cast<float>()));
-  }
-  return sdfGrid(unionSdf(placed), Eigen::Vector3f(-2, -2, -0.2f), Eigen::Vector3f(2, 2, 1.2f),
-                 kVoxel, kBand)
-      .layer;
-}
+Transform pose(double x, double y, double yaw) { return objdb::testing::poseXyYaw(x, y, yaw); }
 
 gsm::RawSegment segment(uint32_t label, const World& w, float x_min = -10, float x_max = 10) {
-  const Eigen::Isometry3f T = w.T_world_object.cast<float>();
-  auto grid = sdfGrid(objdb::testing::transformedSdf(w.shape, T), Eigen::Vector3f(-2, -2, -0.2f),
-                      Eigen::Vector3f(2, 2, 1.2f), kVoxel, kBand);
-  gsm::RawSegment raw{label, Transform::Identity(), std::move(grid.layer), {}, 0, 0};
-  for (const auto& v : grid.surface_voxels) {
-    const Eigen::Vector3f p = T.inverse() * raw.grid.voxelCenter(v);
-    if (p.x() >= x_min && p.x() <= x_max && p.z() > 0.01f) raw.label_voxels.push_back(v);
-  }
-  return raw;
+  return objdb::testing::rawSegment(label, w, View{x_min, x_max});
 }
 
 Params params(int threads = 2) {

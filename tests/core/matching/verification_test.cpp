@@ -119,6 +119,25 @@ TEST(MergeGrids, WeightedAverageWhereBothAndSourceValuesWhereOnlyItObserved) {
   EXPECT_FLOAT_EQ(capped.voxel(both)->weight, 2.5f);
 }
 
+TEST(MergeGrids, FillUnobservedLeavesObservedVoxelsAlone) {
+  tsdf::TsdfLayer target = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  const tsdf::TsdfLayer source = linearField(0.01f, 1.0f, -0.1f, 0.3f);
+  size_t near_surface = 0;
+  const size_t written = mergeGrids(&target, source, Transform::Identity(), 100.0f,
+                                    MergeMode::kFillUnobserved, &near_surface);
+  EXPECT_GT(written, 0u);
+  EXPECT_GT(near_surface, 0u);
+  EXPECT_LT(near_surface, written);  // the band is wider than one voxel
+  // Observed by the target: unchanged.
+  const tsdf::VoxelIndex both = target.voxelIndexOf(Eigen::Vector3f(0.0f, 0.0f, 0.013f));
+  EXPECT_NEAR(target.voxel(both)->distance, target.voxelCenter(both).z(), 1e-6f);
+  EXPECT_FLOAT_EQ(target.voxel(both)->weight, 2.0f);
+  // Only the source saw it: filled.
+  const tsdf::VoxelIndex only = target.voxelIndexOf(Eigen::Vector3f(0.2f, 0.0f, 0.013f));
+  ASSERT_NE(target.voxel(only), nullptr);
+  EXPECT_NEAR(target.voxel(only)->distance, target.voxelCenter(only).z() - 0.01f, 1e-6f);
+}
+
 TEST(MergeGrids, ATransformedSourceLandsWhereTheTransformSays) {
   // The same box in two frames: source frame = target frame moved by T.
   const Sdf box = boxSdf({0, 0, 0}, {0.1f, 0.08f, 0.06f});

@@ -1,0 +1,47 @@
+#include "core/completion/scene_completion.h"
+
+#include "absl/strings/str_format.h"
+
+namespace objdb::completion {
+
+StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
+                                        const std::string& session, const MergingParams& merging,
+                                        float max_weight, CompletionReport* report) {
+  OBJDB_RETURN_IF_ERROR(merging.validate());
+  const auto scene = store.scene(session);
+  if (scene == nullptr) {
+    return absl::NotFoundError(absl::StrFormat("completion: no scene map for session %s", session));
+  }
+  // Checks run against the scene as measured, fills go into the copy: one object's fill never
+  // decides another's verification.
+  tsdf::TsdfLayer completed = scene->clone();
+  CompletionReport local;
+  CompletionReport& out = report ? *report : local;
+  out = {};
+  for (int64_t id : store.modelIds()) {
+    OBJDB_ASSIGN_OR_RETURN(auto model, store.model(id));
+    if (model->observations.size() < 2) continue;
+    for (const auto& o : model->observations) {
+      if (o.session != session) continue;
+      Placement p;
+      p.model_id = id;
+      p.label = o.label;
+      p.T_world_object = o.T_world_object;
+      p.model_segments = model->observations.size();
+      p.verdict = matching::judge(
+          matching::compareGrids(model->grid, *scene, o.T_world_object.inverse()), merging,
+          model->grid.voxelSize());
+      p.verified = p.verdict.accepted;
+      if (p.verified) {
+        p.filled_voxels =
+            matching::mergeGrids(&completed, model->grid, o.T_world_object, max_weight,
+                                 matching::MergeMode::kFillUnobserved, &p.filled_surface_voxels);
+      }
+      out.filled_voxels += p.filled_voxels;
+      out.placements.push_back(p);
+    }
+  }
+  return completed;
+}
+
+}  // namespace objdb::completion

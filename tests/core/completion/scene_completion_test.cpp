@@ -1,0 +1,93 @@
+#include "core/completion/scene_completion.h"
+
+#include <cmath>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "core/database/object_database.h"
+#include "tests/support/object_scenes.h"
+
+namespace objdb::completion {
+namespace {
+
+using objdb::testing::boxWithBall;
+using objdb::testing::kSceneVoxel;
+using objdb::testing::PlacedShape;
+using objdb::testing::poseXyYaw;
+using objdb::testing::rawSegment;
+using objdb::testing::sceneGrid;
+using objdb::testing::View;
+using ::testing::HasSubstr;
+
+// The same object seen from its front end on Monday and from its back end on Tuesday.
+const PlacedShape kMonday{boxWithBall(), poseXyYaw(0.3, -0.2, 0.3)};
+const PlacedShape kTuesday{boxWithBall(), poseXyYaw(-0.5, 0.4, 2.0)};
+const View kFront{-1.0f, 0.12f}, kBack{-0.12f, 1.0f};
+
+Params params() {
+  Params p;
+  p.tsdf.voxel_size_m = kSceneVoxel;
+  return p;
+}
+
+struct Fixture {
+  database::InMemoryModelStore store;
+  std::unique_ptr<database::ObjectDatabase> db;
+  Fixture() {
+    store.setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}, {kFront})));
+    store.setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday}, {kBack})));
+    db = database::ObjectDatabase::create(params(), &store).value();
+  }
+};
+
+TEST(CompleteScene, FillsTheSideOfAnObjectThatOnlyAnotherSessionSaw) {
+  Fixture f;
+  ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
+  auto merged = f.db->insertSegment("tuesday", rawSegment(1, kTuesday, kBack));
+  ASSERT_TRUE(merged.ok()) << merged.status();
+  ASSERT_TRUE(merged->merged) << (merged->results.empty() ? "no candidate"
+                                                          : merged->results[0].reason);
+  // A point on the object's back face (object-frame x = 0.2), which Monday never observed.
+  const Eigen::Vector3f back_object(0.2f, 0.0f, 0.1f);
+  const Eigen::Vector3f back_world = kMonday.T_world_object.cast<float>() * back_object;
+  float d = 0.0f;
+  const auto scene = f.store.scene("monday");
+  ASSERT_FALSE(scene->interpolateDistance(back_world, &d));
+
+  CompletionReport report;
+  auto completed = completeScene(f.store, "monday", params().merging, 1000.0f, &report);
+  ASSERT_TRUE(completed.ok()) << completed.status();
+  ASSERT_EQ(report.placements.size(), 1u);
+  const Placement& p = report.placements[0];
+  EXPECT_TRUE(p.verified) << p.verdict.reason;
+  EXPECT_EQ(p.model_segments, 2u);
+  EXPECT_GT(p.filled_surface_voxels, 100u);
+  EXPECT_EQ(report.filled_voxels, p.filled_voxels);
+  // The back face is there now, where the true surface is (registration error aside).
+  ASSERT_TRUE(completed->interpolateDistance(back_world, &d));
+  EXPECT_LT(std::abs(d), 0.015f);
+  // What Monday measured is untouched.
+  const Eigen::Vector3f front_world =
+      kMonday.T_world_object.cast<float>() * Eigen::Vector3f(-0.2f, 0.0f, 0.1f);
+  float before = 0.0f, after = 0.0f;
+  ASSERT_TRUE(scene->interpolateDistance(front_world, &before));
+  ASSERT_TRUE(completed->interpolateDistance(front_world, &after));
+  EXPECT_EQ(before, after);
+}
+
+TEST(CompleteScene, SingleSegmentModelsAddNothingAndAMissingSceneIsAnError) {
+  Fixture f;
+  ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
+  CompletionReport report;
+  auto completed = completeScene(f.store, "monday", params().merging, 1000.0f, &report);
+  ASSERT_TRUE(completed.ok());
+  EXPECT_TRUE(report.placements.empty());
+  EXPECT_EQ(completed->numObservedVoxels(), f.store.scene("monday")->numObservedVoxels());
+  const auto missing = completeScene(f.store, "friday", params().merging, 1000.0f, nullptr);
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(std::string(missing.status().message()), HasSubstr("session friday"));
+}
+
+}  // namespace
+}  // namespace objdb::completion
