@@ -142,7 +142,11 @@ int main(int argc, char** argv) {
     }
     for (auto& s : map.extractIdle(true)) extracted.insert_or_assign(s.label, std::move(s));
     gsm_seconds += secondsSince(t_gsm);
-    store.setScene(scene.name, std::make_shared<tsdf::TsdfLayer>(map.tsdf().clone()));
+    const Status stored = store.putScene(scene.name, std::make_shared<tsdf::TsdfLayer>(map.tsdf().clone()));
+    if (!stored.ok()) {
+      std::fprintf(stderr, "database_eval: %s\n", std::string(stored.message()).c_str());
+      return 1;
+    }
 
     std::map<int, std::pair<std::string, bool>> objects;  // id → (kind, structure)
     for (const auto& o : scene.objects) objects[o.id] = {o.category, o.structure};
@@ -188,7 +192,8 @@ int main(int argc, char** argv) {
       ++raw_segments;
       std::set<int64_t> relevant;
       if (t.kind != "structure" && t.kind != "unknown") {
-        for (int64_t id : store.modelIds()) {
+        const std::vector<int64_t> ids_now = store.modelIds().value();
+        for (int64_t id : ids_now) {
           const auto m = store.model(id).value();
           if (!m->matchable(params.model)) continue;
           for (const auto& o : m->observations) {
@@ -240,7 +245,7 @@ int main(int argc, char** argv) {
     }
     std::printf("%s: %zu raw segments, %zu merged into earlier models, %zu models so far "
                 "(%.1f s since start)\n",
-                scene.name.c_str(), extracted.size(), session_merges, store.modelIds().size(),
+                scene.name.c_str(), extracted.size(), session_merges, store.modelIds().value().size(),
                 secondsSince(start));
   }
 
@@ -249,7 +254,8 @@ int main(int argc, char** argv) {
   std::map<std::string, size_t> kind_segments;  // matchable segments per kind
   std::map<database::SegmentKey, int64_t> model_of;
   std::map<int64_t, std::vector<database::SegmentKey>> members;
-  for (int64_t id : store.modelIds()) {
+  const std::vector<int64_t> final_ids = store.modelIds().value();
+  for (int64_t id : final_ids) {
     const auto m = store.model(id).value();
     ++models;
     std::set<std::string> kinds;
@@ -341,7 +347,7 @@ int main(int argc, char** argv) {
     size_t placements = 0, verified = 0;
     for (int si = 0; si < sessions; ++si) {
       const std::string& name = scenes[size_t(si)].name;
-      const auto scene = store.scene(name);
+      const auto scene = store.scene(name).value();
       completion::CompletionReport report;
       auto completed =
           completion::completeScene(store, name, params.merging, params.tsdf.max_weight, &report);
@@ -381,7 +387,7 @@ int main(int argc, char** argv) {
     // A database of `scale` models: copies of the lounge's, each under its own session name
     // (with the raw segments and scene maps it refers to), then the last session inserted again.
     database::InMemoryModelStore big;
-    const std::vector<int64_t> ids = store.modelIds();
+    const std::vector<int64_t> ids = store.modelIds().value();
     const auto t_fill = Clock::now();
     for (int c = 0; c < scale; ++c) {
       const auto source = store.model(ids[size_t(c) % ids.size()]).value();
@@ -389,14 +395,18 @@ int main(int argc, char** argv) {
       const std::string prefix = absl::StrFormat("copy%d/", c);
       for (auto& o : copy.observations) {
         auto segment = *store.rawSegment({o.session, o.label}).value();
-        if (!big.scene(prefix + o.session)) big.setScene(prefix + o.session, store.scene(o.session));
+        if (big.scene(prefix + o.session).value() == nullptr) {
+          (void)big.putScene(prefix + o.session, store.scene(o.session).value());
+        }
         o.session = prefix + o.session;
         segment.key.session = o.session;
         (void)big.putRawSegment(segment);
       }
       (void)big.addModel(std::move(copy));
     }
-    for (int si = 0; si < sessions; ++si) big.setScene(scenes[size_t(si)].name, store.scene(scenes[size_t(si)].name));
+    for (int si = 0; si < sessions; ++si) {
+      (void)big.putScene(scenes[size_t(si)].name, store.scene(scenes[size_t(si)].name).value());
+    }
     auto big_db = database::ObjectDatabase::create(params, &big).value();
     std::printf("\nDatabase of %d models (copies of the lounge's %zu) filled in %.1f s; inserting "
                 "the %zu segments of the last session:\n",

@@ -8,7 +8,7 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
                                         const std::string& session, const MergingParams& merging,
                                         float max_weight, CompletionReport* report) {
   OBJDB_RETURN_IF_ERROR(merging.validate());
-  const auto scene = store.scene(session);
+  OBJDB_ASSIGN_OR_RETURN(const auto scene, store.scene(session));
   if (scene == nullptr) {
     return absl::NotFoundError(absl::StrFormat("completion: no scene map for session %s", session));
   }
@@ -18,7 +18,8 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
   CompletionReport local;
   CompletionReport& out = report ? *report : local;
   out = {};
-  for (int64_t id : store.modelIds()) {
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<int64_t> ids, store.modelIds());
+  for (int64_t id : ids) {
     OBJDB_ASSIGN_OR_RETURN(auto model, store.model(id));
     if (model->observations.size() < 2) continue;
     for (const auto& o : model->observations) {

@@ -4,6 +4,21 @@
 
 namespace objdb::database {
 
+bool MatchEntry::matchable(const ModelParams& params) const {
+  return model::isMatchable(planar, num_points, num_keypoints, descriptors.size(), params);
+}
+
+MatchEntry matchEntryOf(const model::ObjectModel& model) {
+  MatchEntry e;
+  e.id = model.id;
+  e.planar = model.planar;
+  e.num_points = model.cloud.points.size();
+  e.num_keypoints = model.keypoint_indices.size();
+  e.descriptors = model.descriptors;
+  for (const auto& o : model.observations) e.segments.push_back({o.session, o.label});
+  return e;
+}
+
 Status InMemoryModelStore::putRawSegment(const RawSegmentRecord& segment) {
   if (segment.grid == nullptr) {
     return absl::InvalidArgumentError(absl::StrFormat(
@@ -60,7 +75,7 @@ StatusOr<std::shared_ptr<const model::ObjectModel>> InMemoryModelStore::model(in
   return it->second;
 }
 
-std::vector<int64_t> InMemoryModelStore::modelIds() const {
+StatusOr<std::vector<int64_t>> InMemoryModelStore::modelIds() const {
   std::lock_guard lock(mutex_);
   std::vector<int64_t> ids;
   ids.reserve(models_.size());
@@ -68,22 +83,35 @@ std::vector<int64_t> InMemoryModelStore::modelIds() const {
   return ids;
 }
 
-std::vector<MergeRecord> InMemoryModelStore::mergeRecords() const {
+StatusOr<MatchEntries> InMemoryModelStore::matchEntries() const {
+  std::lock_guard lock(mutex_);
+  MatchEntries out;
+  out.entries.reserve(models_.size());
+  for (const auto& [id, model] : models_) out.entries.push_back(matchEntryOf(*model));
+  return out;
+}
+
+StatusOr<std::vector<MergeRecord>> InMemoryModelStore::mergeRecords() const {
   std::lock_guard lock(mutex_);
   return merges_;
 }
 
-std::shared_ptr<const tsdf::TsdfLayer> InMemoryModelStore::scene(
+StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> InMemoryModelStore::scene(
     const std::string& session) const {
   std::lock_guard lock(mutex_);
   const auto it = scenes_.find(session);
-  return it == scenes_.end() ? nullptr : it->second;
+  if (it == scenes_.end()) return std::shared_ptr<const tsdf::TsdfLayer>();
+  return it->second;
 }
 
-void InMemoryModelStore::setScene(const std::string& session,
-                                  std::shared_ptr<const tsdf::TsdfLayer> scene) {
+Status InMemoryModelStore::putScene(const std::string& session,
+                                    std::shared_ptr<const tsdf::TsdfLayer> scene) {
+  if (scene == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
+  }
   std::lock_guard lock(mutex_);
   scenes_[session] = std::move(scene);
+  return absl::OkStatus();
 }
 
 }  // namespace objdb::database

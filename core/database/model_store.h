@@ -45,6 +45,25 @@ struct MergeRecord {
   size_t scene_checks = 0;  // model-to-scene verifications passed
 };
 
+// One model as the prefilter sees it.
+struct MatchEntry {
+  int64_t id = 0;
+  bool planar = false;
+  size_t num_points = 0;
+  size_t num_keypoints = 0;
+  std::vector<model::Fpfh> descriptors;
+  std::vector<SegmentKey> segments;  // the raw segments it holds (its observations)
+  // The same rule as ObjectModel::matchable.
+  bool matchable(const ModelParams& params) const;
+};
+
+struct MatchEntries {
+  std::vector<MatchEntry> entries;  // ascending id
+  std::vector<Status> skipped;      // models that could not be read, with the reason
+};
+
+MatchEntry matchEntryOf(const model::ObjectModel& model);
+
 class ModelStore {
  public:
   virtual ~ModelStore() = default;
@@ -61,12 +80,19 @@ class ModelStore {
                               const std::optional<MergeRecord>& merge) = 0;
   virtual Status removeModel(int64_t id) = 0;
   virtual StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const = 0;
-  // Ids of the stored models, ascending.
-  virtual std::vector<int64_t> modelIds() const = 0;
-  virtual std::vector<MergeRecord> mergeRecords() const = 0;
+  // Ids of the stored (active) models, ascending.
+  virtual StatusOr<std::vector<int64_t>> modelIds() const = 0;
+  // What the matcher's prefilter needs of every active model, without grids and clouds. Models
+  // whose data cannot be read are left out and named in `skipped`.
+  virtual StatusOr<MatchEntries> matchEntries() const = 0;
+  virtual StatusOr<std::vector<MergeRecord>> mergeRecords() const = 0;
 
-  // The scene map of a session (null when unknown).
-  virtual std::shared_ptr<const tsdf::TsdfLayer> scene(const std::string& session) const = 0;
+  // Stores the scene map of a session, replacing an earlier one.
+  virtual Status putScene(const std::string& session,
+                          std::shared_ptr<const tsdf::TsdfLayer> scene) = 0;
+  // The scene map of a session (null when the session has none).
+  virtual StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
+      const std::string& session) const = 0;
 };
 
 class InMemoryModelStore : public ModelStore {
@@ -78,11 +104,13 @@ class InMemoryModelStore : public ModelStore {
   Status replaceModel(model::ObjectModel model, const std::optional<MergeRecord>& merge) override;
   Status removeModel(int64_t id) override;
   StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
-  std::vector<int64_t> modelIds() const override;
-  std::vector<MergeRecord> mergeRecords() const override;
-  std::shared_ptr<const tsdf::TsdfLayer> scene(const std::string& session) const override;
-
-  void setScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene);
+  StatusOr<std::vector<int64_t>> modelIds() const override;
+  StatusOr<MatchEntries> matchEntries() const override;
+  StatusOr<std::vector<MergeRecord>> mergeRecords() const override;
+  Status putScene(const std::string& session,
+                  std::shared_ptr<const tsdf::TsdfLayer> scene) override;
+  StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
+      const std::string& session) const override;
 
  private:
   mutable std::mutex mutex_;

@@ -29,9 +29,13 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
   if (store == nullptr) return absl::InvalidArgumentError("object database: no store given");
   std::unique_ptr<ObjectDatabase> db(new ObjectDatabase(params, store));
   // Which model holds which segment, from the store (a reopened database carries on).
-  for (int64_t id : store->modelIds()) {
-    OBJDB_ASSIGN_OR_RETURN(auto model, store->model(id));
-    for (const auto& o : model->observations) db->segment_model_[keyOf(o)] = id;
+  OBJDB_ASSIGN_OR_RETURN(const MatchEntries entries, store->matchEntries());
+  for (const auto& e : entries.entries) {
+    for (const auto& key : e.segments) db->segment_model_[key] = e.id;
+  }
+  for (const auto& skipped : entries.skipped) {
+    logger("database")->error("object database: a stored model is unreadable and left out: {}",
+                              std::string(skipped.message()));
   }
   return db;
 }
@@ -114,17 +118,21 @@ std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
   return indices_.emplace(model.id, std::move(index)).first->second;
 }
 
-std::vector<int64_t> ObjectDatabase::candidatesFor(const model::ObjectModel& model) {
+StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model) {
   std::lock_guard lock(mutex_);
   if (global_dirty_) {
     std::vector<model::Fpfh> all;
     global_owner_.clear();
-    for (int64_t id : store_->modelIds()) {
-      auto stored = store_->model(id);
-      if (!stored.ok() || !(*stored)->matchable(params_.model)) continue;
-      for (const auto& d : (*stored)->descriptors) {
+    auto entries = store_->matchEntries();
+    if (!entries.ok()) return entries.status();
+    for (const auto& skipped : entries->skipped) {
+      logger("database")->warn("prefilter: skipping an unreadable model: {}", std::string(skipped.message()));
+    }
+    for (const auto& e : entries->entries) {
+      if (!e.matchable(params_.model)) continue;
+      for (const auto& d : e.descriptors) {
         all.push_back(d);
-        global_owner_.push_back(id);
+        global_owner_.push_back(e.id);
       }
     }
     global_ = std::make_unique<matching::DescriptorIndex>(all);
@@ -192,7 +200,15 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
     poses.emplace_back(o.session, o.T_world_object * T_i_j);
   }
   for (const auto& [session, T_world_object] : poses) {
-    const auto scene = store_->scene(session);
+    auto stored_scene = store_->scene(session);
+    if (!stored_scene.ok()) {
+      result.stage = "scene";
+      result.reason = absl::StrFormat("scene of session %s unreadable: %s", session,
+                                      stored_scene.status().message());
+      timings->scene_verify_ms += msSince(t);
+      return result;
+    }
+    const auto& scene = *stored_scene;
     if (scene == nullptr) {
       ++result.scenes_missing;
       continue;
@@ -246,14 +262,26 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   report.matchable = incoming.matchable(params_.model);
 
   std::vector<int64_t> candidates;
-  if (report.matchable) candidates = candidatesFor(incoming);
+  std::vector<std::shared_ptr<const model::ObjectModel>> loaded;
+  if (report.matchable) {
+    OBJDB_ASSIGN_OR_RETURN(std::vector<int64_t> ranked, candidatesFor(incoming));
+    candidates.reserve(ranked.size());
+    for (int64_t id : ranked) {
+      auto candidate = store_->model(id);
+      if (!candidate.ok()) {
+        // A damaged model costs its own matches only; the insert carries on without it.
+        ++report.unreadable_candidates;
+        logger("database")->warn("segment {}/{}: candidate object {} skipped: {}", session,
+                                 segment.label, id, std::string(candidate.status().message()));
+        continue;
+      }
+      candidates.push_back(id);
+      loaded.push_back(*std::move(candidate));
+    }
+  }
   report.candidates = candidates.size();
   report.results.resize(candidates.size());
   std::vector<InsertTimings> per_candidate(candidates.size());
-  std::vector<std::shared_ptr<const model::ObjectModel>> loaded(candidates.size());
-  for (size_t c = 0; c < candidates.size(); ++c) {
-    OBJDB_ASSIGN_OR_RETURN(loaded[c], store_->model(candidates[c]));
-  }
   std::atomic<size_t> next{0};
   auto work = [&] {
     for (size_t c = next++; c < candidates.size(); c = next++) {

@@ -48,7 +48,8 @@ struct InsertReport {
   bool planar = false;
   bool matchable = false;
   bool replaced_earlier = false; // the segment's key had been inserted before
-  size_t candidates = 0;         // after the prefilter
+  size_t candidates = 0;         // after the prefilter, readable
+  size_t unreadable_candidates = 0;  // prefilter candidates whose stored data failed to load
   std::vector<CandidateResult> results;  // one per candidate, in candidate order
   InsertTimings timings;
 };
@@ -63,7 +64,7 @@ class ObjectDatabase {
   StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment);
 
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
-  std::vector<int64_t> candidatesFor(const model::ObjectModel& model);
+  StatusOr<std::vector<int64_t>> candidatesFor(const model::ObjectModel& model);
 
  private:
   ObjectDatabase(const Params& params, ModelStore* store);

@@ -19,9 +19,15 @@ double msSince(Clock::time_point t) {
 
 }  // namespace
 
+bool isMatchable(bool planar, size_t num_points, size_t num_keypoints, size_t num_descriptors,
+                 const ModelParams& params) {
+  return !planar && num_points >= size_t(params.min_points) && num_keypoints >= 3 &&
+         num_descriptors == num_keypoints;
+}
+
 bool ObjectModel::matchable(const ModelParams& params) const {
-  return !planar && cloud.points.size() >= size_t(params.min_points) &&
-         keypoint_indices.size() >= 3 && descriptors.size() == keypoint_indices.size();
+  return isMatchable(planar, cloud.points.size(), keypoint_indices.size(), descriptors.size(),
+                     params);
 }
 
 ObjectModel cloneModel(const ObjectModel& model) {

@@ -58,6 +58,10 @@ struct ObjectModel {
   Eigen::Vector3f keypoint(size_t k) const { return cloud.points[keypoint_indices[k]]; }
 };
 
+// The matchable rule on a model's counts (ObjectModel::matchable, the prefilter's index entries).
+bool isMatchable(bool planar, size_t num_points, size_t num_keypoints, size_t num_descriptors,
+                 const ModelParams& params);
+
 // A deep copy (models are move-only: their grid owns its blocks).
 ObjectModel cloneModel(const ObjectModel& model);
 

@@ -35,8 +35,8 @@ struct Fixture {
   database::InMemoryModelStore store;
   std::unique_ptr<database::ObjectDatabase> db;
   Fixture() {
-    store.setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}, {kFront})));
-    store.setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday}, {kBack})));
+    EXPECT_TRUE(store.putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}, {kFront}))).ok());
+    EXPECT_TRUE(store.putScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday}, {kBack}))).ok());
     db = database::ObjectDatabase::create(params(), &store).value();
   }
 };
@@ -52,7 +52,7 @@ TEST(CompleteScene, FillsTheSideOfAnObjectThatOnlyAnotherSessionSaw) {
   const Eigen::Vector3f back_object(0.2f, 0.0f, 0.1f);
   const Eigen::Vector3f back_world = kMonday.T_world_object.cast<float>() * back_object;
   float d = 0.0f;
-  const auto scene = f.store.scene("monday");
+  const auto scene = f.store.scene("monday").value();
   ASSERT_FALSE(scene->interpolateDistance(back_world, &d));
 
   CompletionReport report;
@@ -83,7 +83,7 @@ TEST(CompleteScene, SingleSegmentModelsAddNothingAndAMissingSceneIsAnError) {
   auto completed = completeScene(f.store, "monday", params().merging, 1000.0f, &report);
   ASSERT_TRUE(completed.ok());
   EXPECT_TRUE(report.placements.empty());
-  EXPECT_EQ(completed->numObservedVoxels(), f.store.scene("monday")->numObservedVoxels());
+  EXPECT_EQ(completed->numObservedVoxels(), f.store.scene("monday").value()->numObservedVoxels());
   const auto missing = completeScene(f.store, "friday", params().merging, 1000.0f, nullptr);
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
   EXPECT_THAT(std::string(missing.status().message()), HasSubstr("session friday"));

@@ -50,8 +50,8 @@ struct Fixture {
 const World kMonday{boxWithBall(), pose(0.3, -0.2, 0.3)};
 const World kTuesday{boxWithBall(), pose(-0.5, 0.4, 2.0)};
 void addScenes(InMemoryModelStore* store) {
-  store->setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday})));
-  store->setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday})));
+  EXPECT_TRUE(store->putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}))).ok());
+  EXPECT_TRUE(store->putScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday}))).ok());
 }
 
 TEST(ObjectDatabase, TwoPartialViewsInTwoSessionsBecomeOneModelWithBothPoses) {
@@ -70,7 +70,7 @@ TEST(ObjectDatabase, TwoPartialViewsInTwoSessionsBecomeOneModelWithBothPoses) {
   ASSERT_TRUE(second->merged) << r.stage << ": " << r.reason;
   EXPECT_EQ(second->model_id, first->model_id);
   EXPECT_EQ(r.scene_checks, 2u);
-  ASSERT_EQ(f.store.modelIds().size(), 1u);
+  ASSERT_EQ(f.store.modelIds().value().size(), 1u);
   auto model = f.store.model(first->model_id).value();
   ASSERT_EQ(model->observations.size(), 2u);
   // The model frame is monday's world (the first segment's frame); on tuesday it sat at
@@ -84,7 +84,7 @@ TEST(ObjectDatabase, TwoPartialViewsInTwoSessionsBecomeOneModelWithBothPoses) {
                                 segment(7, a, -0.3f, 0.1f).label_voxels, model::ModelBuildParams{});
   EXPECT_GT(model->surface_voxels.size(), lone->surface_voxels.size() * 5 / 4);
   EXPECT_GT(model->cloud.points.size(), lone->cloud.points.size() * 23 / 20);
-  const auto merges = f.store.mergeRecords();
+  const auto merges = f.store.mergeRecords().value();
   ASSERT_EQ(merges.size(), 1u);
   EXPECT_EQ(merges[0].target, first->model_id);
   EXPECT_LE(merges[0].tsdf_rmse_m, 0.02);
@@ -94,12 +94,12 @@ TEST(ObjectDatabase, AChairAndAFireExtinguisherAreNeverMerged) {
   Fixture f;
   const World c{chair(), pose(0, 0, 0.2)};
   const World e{extinguisher(), pose(1.0, 0.5, 1.0)};
-  f.store.setScene("s", std::make_shared<tsdf::TsdfLayer>(sceneGrid({c, e})));
+  EXPECT_TRUE(f.store.putScene("s", std::make_shared<tsdf::TsdfLayer>(sceneGrid({c, e}))).ok());
   ASSERT_TRUE(f.db->insertSegment("s", segment(1, c)).ok());
   auto r = f.db->insertSegment("s", segment(2, e));
   ASSERT_TRUE(r.ok()) << r.status();
   EXPECT_FALSE(r->merged);
-  EXPECT_EQ(f.store.modelIds().size(), 2u);
+  EXPECT_EQ(f.store.modelIds().value().size(), 2u);
   for (const auto& c : r->results) EXPECT_FALSE(c.accepted) << c.model_id;
 }
 
@@ -123,7 +123,7 @@ TEST(ObjectDatabase, PlanarSegmentsAreStoredButNeverMatched) {
   EXPECT_FALSE(a->matchable);
   EXPECT_EQ(b->candidates, 0u);
   EXPECT_FALSE(b->merged);
-  EXPECT_EQ(f.store.modelIds().size(), 2u);
+  EXPECT_EQ(f.store.modelIds().value().size(), 2u);
 }
 
 TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
@@ -138,28 +138,28 @@ TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
   ASSERT_TRUE(again.ok()) << again.status();
   EXPECT_TRUE(again->replaced_earlier);
   EXPECT_TRUE(again->merged);
-  ASSERT_EQ(f.store.modelIds().size(), 1u);
-  EXPECT_EQ(f.store.model(f.store.modelIds()[0]).value()->observations.size(), 2u);
+  ASSERT_EQ(f.store.modelIds().value().size(), 1u);
+  EXPECT_EQ(f.store.model(f.store.modelIds().value()[0]).value()->observations.size(), 2u);
   EXPECT_EQ(f.store.rawSegment({"tuesday", 3}).value()->voxels.size(),
             segment(3, b, -0.2f, 0.3f).label_voxels.size());
   // A lone segment re-extracted: its model is replaced, not duplicated.
   const World e{extinguisher(), pose(1.0, 0.5, 1.0)};
   ASSERT_TRUE(f.db->insertSegment("monday", segment(9, e)).ok());
   ASSERT_TRUE(f.db->insertSegment("monday", segment(9, e)).ok());
-  EXPECT_EQ(f.store.modelIds().size(), 2u);
+  EXPECT_EQ(f.store.modelIds().value().size(), 2u);
 }
 
 TEST(ObjectDatabase, TheSceneVetoesAMergeItContradicts) {
   Fixture f;
   const World& a = kMonday;
   const World& b = kTuesday;
-  f.store.setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({a})));
+  EXPECT_TRUE(f.store.putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({a}))).ok());
   // Tuesday's map says: free space all around where the object would be.
   const Sdf empty = [](const Eigen::Vector3f&) { return kBand; };
-  f.store.setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(
+  EXPECT_TRUE(f.store.putScene("tuesday", std::make_shared<tsdf::TsdfLayer>(
                                   sdfGrid(empty, Eigen::Vector3f(-1.2f, -0.4f, 0.0f),
                                           Eigen::Vector3f(0.2f, 1.2f, 0.5f), kVoxel, kBand)
-                                      .layer));
+                                      .layer)).ok());
   ASSERT_TRUE(f.db->insertSegment("monday", segment(7, a, -0.3f, 0.1f)).ok());
   auto r = f.db->insertSegment("tuesday", segment(3, b, -0.1f, 0.3f));
   ASSERT_TRUE(r.ok());
@@ -167,7 +167,7 @@ TEST(ObjectDatabase, TheSceneVetoesAMergeItContradicts) {
   EXPECT_FALSE(r->merged);
   EXPECT_EQ(r->results[0].stage, "scene");
   EXPECT_THAT(r->results[0].reason, HasSubstr("session tuesday"));
-  EXPECT_EQ(f.store.modelIds().size(), 2u);
+  EXPECT_EQ(f.store.modelIds().value().size(), 2u);
 }
 
 TEST(ObjectDatabase, OneOrTwoThreadsGiveTheSameDatabase) {
@@ -176,13 +176,14 @@ TEST(ObjectDatabase, OneOrTwoThreadsGiveTheSameDatabase) {
     const World a{boxWithBall(), pose(0.3, -0.2, 0.3)};
     const World b{boxWithBall(), pose(-0.5, 0.4, 2.0)};
     const World c{chair(), pose(1.0, 1.0, 0.0)};
-    f.store.setScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({a, c})));
-    f.store.setScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({b})));
+    EXPECT_TRUE(f.store.putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({a, c}))).ok());
+    EXPECT_TRUE(f.store.putScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({b}))).ok());
     f.db->insertSegment("monday", segment(1, a, -0.3f, 0.1f)).value();
     f.db->insertSegment("monday", segment(2, c)).value();
     f.db->insertSegment("tuesday", segment(1, b, -0.1f, 0.3f)).value();
     std::vector<std::pair<int64_t, std::vector<Eigen::Matrix4d>>> out;
-    for (int64_t id : f.store.modelIds()) {
+    const std::vector<int64_t> ids = f.store.modelIds().value();
+    for (int64_t id : ids) {
       std::vector<Eigen::Matrix4d> poses;
       for (const auto& o : f.store.model(id).value()->observations) {
         poses.push_back(o.T_world_object.matrix());
@@ -206,7 +207,7 @@ TEST(ObjectDatabase, BadInputIsAClearError) {
   empty.label_voxels.clear();
   EXPECT_THAT(std::string(f.db->insertSegment("s", empty).status().message()),
               HasSubstr("has no voxels"));
-  EXPECT_TRUE(f.store.modelIds().empty());
+  EXPECT_TRUE(f.store.modelIds().value().empty());
   Params bad = params();
   bad.database.threads = 0;
   EXPECT_THAT(std::string(ObjectDatabase::create(bad, &f.store).status().message()),

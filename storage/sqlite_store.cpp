@@ -1,0 +1,873 @@
+#include "storage/sqlite_store.h"
+
+#include <filesystem>
+#include <functional>
+#include <map>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "core/common/logging.h"
+
+namespace objdb::storage {
+namespace {
+
+constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
+
+// Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
+Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
+  return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
+}
+
+// A model's columns, encoded outside the write lock.
+struct EncodedModel {
+  bool planar = false;
+  double plane_inlier_ratio = 0;
+  int64_t num_points = 0, num_keypoints = 0;
+  double voxel_size = 0;
+  Eigen::Vector3f bbox_min = Eigen::Vector3f::Zero(), bbox_max = Eigen::Vector3f::Zero();
+  std::string grid, surface_voxels, cloud, keypoints, descriptors;
+  model::BuildTimings timings;
+  struct Obs {
+    std::string session;
+    int64_t label;
+    std::string T_world_object, T_object_segment;
+  };
+  std::vector<Obs> observations;
+};
+
+EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
+  EncodedModel e;
+  e.planar = m.planar;
+  e.plane_inlier_ratio = m.plane_inlier_ratio;
+  e.num_points = int64_t(m.cloud.points.size());
+  e.num_keypoints = int64_t(m.keypoint_indices.size());
+  e.voxel_size = m.grid.voxelSize();
+  if (!m.cloud.points.empty()) {
+    e.bbox_min = e.bbox_max = m.cloud.points.front();
+    for (const auto& p : m.cloud.points) {
+      e.bbox_min = e.bbox_min.cwiseMin(p);
+      e.bbox_max = e.bbox_max.cwiseMax(p);
+    }
+  }
+  e.grid = encodeTsdfGrid(m.grid, options);
+  e.surface_voxels = encodeVoxelList(m.surface_voxels, options);
+  e.cloud = encodePointCloud(m.cloud, options);
+  e.keypoints = encodeIndices(m.keypoint_indices, options);
+  e.descriptors = encodeDescriptors(m.descriptors, options);
+  e.timings = m.timings;
+  for (const auto& o : m.observations) {
+    e.observations.push_back({o.session, int64_t(o.label), encodeTransform(o.T_world_object),
+                              encodeTransform(o.T_object_segment)});
+  }
+  return e;
+}
+
+// Binds the model columns in the order of kModelColumns to parameters 1..N.
+constexpr const char* kModelColumns =
+    "planar, plane_inlier_ratio, num_points, num_keypoints, voxel_size, bbox_min_x, bbox_min_y, "
+    "bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, grid, surface_voxels, cloud, keypoints, "
+    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms";
+constexpr int kNumModelColumns = 20;
+
+void bindModel(Statement* s, const EncodedModel& e) {
+  s->bind(1, int64_t(e.planar)).bind(2, e.plane_inlier_ratio).bind(3, e.num_points);
+  s->bind(4, e.num_keypoints).bind(5, e.voxel_size);
+  for (int k = 0; k < 3; ++k) s->bind(6 + k, double(e.bbox_min[k]));
+  for (int k = 0; k < 3; ++k) s->bind(9 + k, double(e.bbox_max[k]));
+  s->bindBlob(12, e.grid).bindBlob(13, e.surface_voxels).bindBlob(14, e.cloud);
+  s->bindBlob(15, e.keypoints).bindBlob(16, e.descriptors);
+  s->bind(17, e.timings.cloud_ms).bind(18, e.timings.planarity_ms);
+  s->bind(19, e.timings.keypoints_ms).bind(20, e.timings.descriptors_ms);
+}
+
+Status duplicateSession(const Status& status, const std::string& name) {
+  if (absl::IsFailedPrecondition(status)) {
+    return absl::AlreadyExistsError(absl::StrFormat("session %s already exists", name));
+  }
+  return status;
+}
+
+}  // namespace
+
+const char* sessionStateName(SessionState state) {
+  switch (state) {
+    case SessionState::kOpen: return "open";
+    case SessionState::kEnded: return "ended";
+    case SessionState::kInterrupted: return "interrupted";
+  }
+  return "open";
+}
+
+Status SqliteStoreOptions::validate() const {
+  if (synchronous != "FULL" && synchronous != "NORMAL") {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("storage.synchronous must be FULL or NORMAL, got '%s'", synchronous));
+  }
+  if (!(busy_timeout_ms >= 0 && busy_timeout_ms <= 600000)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("storage.busy_timeout_ms must be in [0, 600000], got %d", busy_timeout_ms));
+  }
+  if (!(max_readers >= 1 && max_readers <= 256)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("storage.max_readers must be in [1, 256], got %d", max_readers));
+  }
+  if (!(journal_size_limit_bytes >= 0)) {
+    return absl::InvalidArgumentError("storage.journal_size_limit_bytes must be >= 0");
+  }
+  return absl::OkStatus();
+}
+
+// A reader connection borrowed from the pool, given back when the lease ends.
+class SqliteStore::ReaderLease {
+ public:
+  ReaderLease(const SqliteStore* store, Connection connection)
+      : store_(store), connection_(std::move(connection)) {}
+  ReaderLease(ReaderLease&& other) noexcept
+      : store_(other.store_), connection_(std::move(other.connection_)) {
+    other.store_ = nullptr;
+    other.connection_.reset();
+  }
+  ReaderLease& operator=(ReaderLease&&) = delete;
+  ~ReaderLease() {
+    if (!connection_ || connection_->get() == nullptr || store_ == nullptr) return;
+    std::lock_guard lock(store_->reader_mutex_);
+    if (store_->idle_readers_.size() < size_t(store_->options_.max_readers)) {
+      store_->idle_readers_.push_back(std::move(*connection_));
+    }
+  }
+  const Connection& operator*() const { return *connection_; }
+
+ private:
+  const SqliteStore* store_;
+  std::optional<Connection> connection_;
+};
+
+SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
+    : path_(std::move(path)), options_(std::move(options)) {}
+
+SqliteStore::~SqliteStore() = default;
+
+StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
+                                                         const SqliteStoreOptions& options) {
+  return open(path, options, schemaMigrations());
+}
+
+StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
+                                                         const SqliteStoreOptions& options,
+                                                         const std::vector<Migration>& migrations) {
+  OBJDB_RETURN_IF_ERROR(options.validate());
+  std::error_code ec;
+  const bool exists = std::filesystem::exists(path, ec);
+  if (!exists && (options.read_only || !options.create_if_missing)) {
+    return absl::NotFoundError(absl::StrFormat("no database at %s", path));
+  }
+  if (exists && !std::filesystem::is_regular_file(path, ec)) {
+    return absl::FailedPreconditionError(absl::StrFormat("%s is not a regular file", path));
+  }
+  std::unique_ptr<SqliteStore> store(new SqliteStore(path, options));
+  ConnectionOptions co;
+  co.read_only = options.read_only;
+  co.create = !exists;
+  co.busy_timeout_ms = options.busy_timeout_ms;
+  co.synchronous = options.synchronous;
+  OBJDB_ASSIGN_OR_RETURN(Connection connection, Connection::open(path, co));
+  if (options.quick_check_on_open && exists) {
+    OBJDB_ASSIGN_OR_RETURN(Statement check, Statement::prepare(connection, "PRAGMA quick_check"));
+    auto row = check.step();
+    if (!row.ok()) return annotate(row.status(), absl::StrFormat("%s failed its check", path));
+    const std::string first = *row ? check.columnText(0) : std::string("no result");
+    if (first != "ok") {
+      return absl::DataLossError(absl::StrFormat("%s is corrupt: %s", path, first));
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(store->schema_,
+                         prepareSchema(connection, path, migrations, options.read_only));
+  if (!options.read_only) {
+    OBJDB_RETURN_IF_ERROR(connection.exec(
+        absl::StrFormat("PRAGMA journal_size_limit=%d", options.journal_size_limit_bytes),
+        "setting journal_size_limit"));
+    store->writer_.emplace(std::move(connection));
+  } else {
+    store->idle_readers_.push_back(std::move(connection));
+  }
+  logger("storage")->info("opened {} (schema {}{})", path, store->schema_.version_after,
+                          store->schema_.created ? ", new" : "");
+  return store;
+}
+
+StatusOr<SqliteStore::ReaderLease> SqliteStore::reader() const {
+  {
+    std::lock_guard lock(reader_mutex_);
+    if (!idle_readers_.empty()) {
+      Connection c = std::move(idle_readers_.back());
+      idle_readers_.pop_back();
+      return ReaderLease(this, std::move(c));
+    }
+  }
+  ConnectionOptions co;
+  co.read_only = true;
+  co.busy_timeout_ms = options_.busy_timeout_ms;
+  co.synchronous = options_.synchronous;
+  OBJDB_ASSIGN_OR_RETURN(Connection c, Connection::open(path_, co));
+  return ReaderLease(this, std::move(c));
+}
+
+Status SqliteStore::requireWriter() const {
+  if (!writer_) {
+    return absl::FailedPreconditionError(absl::StrFormat("%s is open read-only", path_));
+  }
+  return absl::OkStatus();
+}
+
+StatusOr<int64_t> SqliteStore::sessionIdForWrite(const std::string& name) {
+  if (name.empty()) return absl::InvalidArgumentError("session name is empty");
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement insert,
+      Statement::prepare(*writer_, absl::StrFormat("INSERT INTO sessions(name, started_at, state) "
+                                                   "VALUES (?, %s, 'open') "
+                                                   "ON CONFLICT(name) DO NOTHING",
+                                                   kNow)));
+  OBJDB_RETURN_IF_ERROR(insert.bind(1, name).run());
+  OBJDB_ASSIGN_OR_RETURN(Statement select,
+                         Statement::prepare(*writer_, "SELECT id FROM sessions WHERE name = ?"));
+  select.bind(1, name);
+  OBJDB_ASSIGN_OR_RETURN(const bool row, select.step());
+  if (!row) return absl::InternalError(absl::StrFormat("session %s vanished", name));
+  return select.columnInt(0);
+}
+
+Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
+  if (segment.grid == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat("raw segment %s/%d has no grid",
+                                                      segment.key.session, segment.key.label));
+  }
+  const std::string pose = encodeTransform(segment.T_world_segment);
+  const std::string grid = encodeTsdfGrid(*segment.grid, options_.blobs);
+  const std::string voxels = encodeVoxelList(segment.voxels, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  const std::string context =
+      absl::StrFormat("storing raw segment %s/%d", segment.key.session, segment.key.label);
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(segment.key.session));
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(
+            *writer_,
+            absl::StrFormat(
+                "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
+                "extraction_frame, extracted_at) VALUES (?, ?, ?, ?, ?, ?, %s) "
+                "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
+                "grid = excluded.grid, voxels = excluded.voxels, "
+                "extraction_frame = excluded.extraction_frame, extracted_at = excluded.extracted_at",
+                kNow)));
+    s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, pose).bindBlob(4, grid);
+    s.bindBlob(5, voxels).bind(6, segment.extraction_frame);
+    OBJDB_RETURN_IF_ERROR(s.run());
+    return txn.commit();
+  };
+  return annotate(body(), context);
+}
+
+StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegment(
+    const database::SegmentKey& key) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease,
+                         "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame "
+                         "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
+                         "WHERE s.name = ? AND r.label = ?"));
+  s.bind(1, key.session).bind(2, int64_t(key.label));
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  if (!row) {
+    return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+  }
+  const int64_t id = s.columnInt(0);
+  auto record = std::make_shared<database::RawSegmentRecord>();
+  record->key = key;
+  auto pose = decodeTransform(s.columnBlob(1));
+  if (!pose.ok()) return inRow(pose.status(), "raw_segments", id, "pose");
+  record->T_world_segment = *pose;
+  auto grid = decodeTsdfGrid(s.columnBlob(2));
+  if (!grid.ok()) return inRow(grid.status(), "raw_segments", id, "grid");
+  record->grid = std::make_shared<const tsdf::TsdfLayer>(std::move(*grid));
+  auto voxels = decodeVoxelList(s.columnBlob(3));
+  if (!voxels.ok()) return inRow(voxels.status(), "raw_segments", id, "voxels");
+  record->voxels = std::move(*voxels);
+  record->extraction_frame = s.columnInt(4);
+  return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
+}
+
+StatusOr<int64_t> SqliteStore::addModel(model::ObjectModel model) {
+  const EncodedModel e = encodeModel(model, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> StatusOr<int64_t> {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    std::string placeholders;
+    for (int i = 0; i < kNumModelColumns; ++i) placeholders += "?, ";
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(*writer_,
+                           absl::StrFormat("INSERT INTO models(%s, state, created_at, updated_at) "
+                                           "VALUES (%s'active', %s, %s)",
+                                           kModelColumns, placeholders, kNow, kNow)));
+    bindModel(&s, e);
+    OBJDB_RETURN_IF_ERROR(s.run());
+    const int64_t id = sqlite3_last_insert_rowid(writer_->get());
+    model.id = id;
+    OBJDB_RETURN_IF_ERROR(writeObservations(&model, true));
+    OBJDB_RETURN_IF_ERROR(txn.commit());
+    return id;
+  };
+  auto id = body();
+  if (!id.ok()) return annotate(id.status(), "adding an object model");
+  return id;
+}
+
+// Observations of `model` (its rows are replaced). Runs inside the caller's transaction.
+Status SqliteStore::writeObservations(model::ObjectModel* model, bool insert) {
+  if (!insert) {
+    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                              *writer_, "DELETE FROM observations WHERE model_id = ?"));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, model->id).run());
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_,
+                         "INSERT INTO observations(model_id, seq, session_id, label, "
+                         "raw_segment_id, T_world_object, T_object_segment) VALUES "
+                         "(?, ?, ?, ?, (SELECT id FROM raw_segments WHERE session_id = ?3 AND "
+                         "label = ?4), ?, ?)"));
+  for (size_t k = 0; k < model->observations.size(); ++k) {
+    const auto& o = model->observations[k];
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(o.session));
+    OBJDB_RETURN_IF_ERROR(s.reset());
+    s.bind(1, model->id).bind(2, int64_t(k)).bind(3, sid).bind(4, int64_t(o.label));
+    s.bindBlob(5, encodeTransform(o.T_world_object)).bindBlob(6, encodeTransform(o.T_object_segment));
+    OBJDB_RETURN_IF_ERROR(s.run());
+  }
+  return absl::OkStatus();
+}
+
+Status SqliteStore::replaceModel(model::ObjectModel model,
+                                 const std::optional<database::MergeRecord>& merge) {
+  const EncodedModel e = encodeModel(model, options_.blobs);
+  const std::string merge_transform = merge ? encodeTransform(merge->T_target_source) : "";
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    std::string assignments;
+    for (const absl::string_view column : absl::StrSplit(kModelColumns, ", ")) {
+      absl::StrAppend(&assignments, column, " = ?, ");
+    }
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(*writer_, absl::StrFormat("UPDATE models SET %supdated_at = %s "
+                                                     "WHERE id = ? AND state = 'active'",
+                                                     assignments, kNow)));
+    bindModel(&s, e);
+    s.bind(kNumModelColumns + 1, model.id);
+    OBJDB_RETURN_IF_ERROR(s.run());
+    if (sqlite3_changes(writer_->get()) == 0) {
+      return absl::NotFoundError(absl::StrFormat("no object model %d to replace", model.id));
+    }
+    OBJDB_RETURN_IF_ERROR(writeObservations(&model, false));
+    if (merge) {
+      OBJDB_ASSIGN_OR_RETURN(
+          Statement m,
+          Statement::prepare(*writer_,
+                             absl::StrFormat("INSERT INTO merge_records(target, source, transform, "
+                                             "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
+                                             "scene_checks, created_at) VALUES "
+                                             "(?, ?, ?, ?, ?, ?, ?, %s)",
+                                             kNow)));
+      m.bind(1, merge->target).bind(2, merge->source).bindBlob(3, merge_transform);
+      m.bind(4, merge->icp_rmse_m).bind(5, merge->tsdf_rmse_m);
+      m.bind(6, int64_t(merge->tsdf_overlap)).bind(7, int64_t(merge->scene_checks));
+      OBJDB_RETURN_IF_ERROR(m.run());
+    }
+    return txn.commit();
+  };
+  return annotate(body(), absl::StrFormat("replacing object model %d", model.id));
+}
+
+Status SqliteStore::removeModel(int64_t id) {
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    // The row stays as a tombstone (ids are never reused; merge records keep their target).
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(*writer_,
+                           absl::StrFormat("UPDATE models SET state = 'removed', grid = NULL, "
+                                           "surface_voxels = NULL, cloud = NULL, keypoints = NULL, "
+                                           "descriptors = NULL, updated_at = %s "
+                                           "WHERE id = ? AND state = 'active'",
+                                           kNow)));
+    OBJDB_RETURN_IF_ERROR(s.bind(1, id).run());
+    if (sqlite3_changes(writer_->get()) == 0) {
+      return absl::NotFoundError(absl::StrFormat("no object model %d to remove", id));
+    }
+    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                              *writer_, "DELETE FROM observations WHERE model_id = ?"));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, id).run());
+    return txn.commit();
+  };
+  return body();
+}
+
+StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t id) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, absl::StrFormat("SELECT %s FROM models WHERE id = ? AND "
+                                                 "state = 'active'",
+                                                 kModelColumns)));
+  s.bind(1, id);
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  if (!row) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
+  const std::string where = absl::StrFormat("object model %d", id);
+  auto grid = decodeTsdfGrid(s.columnBlob(11));
+  if (!grid.ok()) return inRow(grid.status(), "models", id, "grid");
+  model::ObjectModel m(std::move(*grid));
+  m.id = id;
+  m.planar = s.columnInt(0) != 0;
+  m.plane_inlier_ratio = float(s.columnDouble(1));
+  auto voxels = decodeVoxelList(s.columnBlob(12));
+  if (!voxels.ok()) return inRow(voxels.status(), "models", id, "surface_voxels");
+  m.surface_voxels = std::move(*voxels);
+  auto cloud = decodePointCloud(s.columnBlob(13));
+  if (!cloud.ok()) return inRow(cloud.status(), "models", id, "cloud");
+  m.cloud = std::move(*cloud);
+  auto keypoints = decodeIndices(s.columnBlob(14));
+  if (!keypoints.ok()) return inRow(keypoints.status(), "models", id, "keypoints");
+  m.keypoint_indices = std::move(*keypoints);
+  auto descriptors = decodeDescriptors(s.columnBlob(15));
+  if (!descriptors.ok()) return inRow(descriptors.status(), "models", id, "descriptors");
+  m.descriptors = std::move(*descriptors);
+  m.timings = {s.columnDouble(16), s.columnDouble(17), s.columnDouble(18), s.columnDouble(19)};
+  for (uint32_t k : m.keypoint_indices) {
+    if (k >= m.cloud.points.size()) {
+      return absl::DataLossError(absl::StrFormat(
+          "%s: keypoint index %d beyond its %d cloud points", where, k, m.cloud.points.size()));
+    }
+  }
+  if (m.descriptors.size() != m.keypoint_indices.size() && !m.descriptors.empty()) {
+    return absl::DataLossError(absl::StrFormat("%s: %d descriptors for %d keypoints", where,
+                                               m.descriptors.size(), m.keypoint_indices.size()));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement o,
+      Statement::prepare(*lease,
+                         "SELECT o.rowid, s.name, o.label, o.T_world_object, o.T_object_segment "
+                         "FROM observations o JOIN sessions s ON s.id = o.session_id "
+                         "WHERE o.model_id = ? ORDER BY o.seq"));
+  o.bind(1, id);
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool more, o.step());
+    if (!more) break;
+    model::Observation obs;
+    obs.session = o.columnText(1);
+    obs.label = uint32_t(o.columnInt(2));
+    auto T_wo = decodeTransform(o.columnBlob(3));
+    if (!T_wo.ok()) return inRow(T_wo.status(), "observations", o.columnInt(0), "T_world_object");
+    auto T_os = decodeTransform(o.columnBlob(4));
+    if (!T_os.ok()) return inRow(T_os.status(), "observations", o.columnInt(0), "T_object_segment");
+    obs.T_world_object = *T_wo;
+    obs.T_object_segment = *T_os;
+    m.observations.push_back(std::move(obs));
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return std::shared_ptr<const model::ObjectModel>(
+      std::make_shared<model::ObjectModel>(std::move(m)));
+}
+
+StatusOr<std::vector<int64_t>> SqliteStore::modelIds() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, "SELECT id FROM models WHERE state = 'active' ORDER BY id"));
+  std::vector<int64_t> ids;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    ids.push_back(s.columnInt(0));
+  }
+  return ids;
+}
+
+StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease,
+                         "SELECT id, planar, num_points, num_keypoints, descriptors FROM models "
+                         "WHERE state = 'active' ORDER BY id"));
+  database::MatchEntries out;
+  std::map<int64_t, size_t> slot;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    database::MatchEntry e;
+    e.id = s.columnInt(0);
+    e.planar = s.columnInt(1) != 0;
+    e.num_points = size_t(s.columnInt(2));
+    e.num_keypoints = size_t(s.columnInt(3));
+    auto descriptors = decodeDescriptors(s.columnBlob(4));
+    if (!descriptors.ok()) {
+      out.skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
+      continue;
+    }
+    e.descriptors = std::move(*descriptors);
+    slot[e.id] = out.entries.size();
+    out.entries.push_back(std::move(e));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement o,
+      Statement::prepare(*lease,
+                         "SELECT o.model_id, s.name, o.label FROM observations o "
+                         "JOIN sessions s ON s.id = o.session_id ORDER BY o.model_id, o.seq"));
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, o.step());
+    if (!row) break;
+    const auto it = slot.find(o.columnInt(0));
+    if (it == slot.end()) continue;
+    out.entries[it->second].segments.push_back({o.columnText(1), uint32_t(o.columnInt(2))});
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return out;
+}
+
+StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecords() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease,
+                         "SELECT id, target, source, transform, icp_rmse_m, tsdf_rmse_m, "
+                         "tsdf_overlap, scene_checks FROM merge_records ORDER BY id"));
+  std::vector<database::MergeRecord> records;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    database::MergeRecord r;
+    r.target = s.columnInt(1);
+    r.source = s.columnText(2);
+    auto T = decodeTransform(s.columnBlob(3));
+    if (!T.ok()) return inRow(T.status(), "merge_records", s.columnInt(0), "transform");
+    r.T_target_source = *T;
+    r.icp_rmse_m = s.columnDouble(4);
+    r.tsdf_rmse_m = s.columnDouble(5);
+    r.tsdf_overlap = size_t(s.columnInt(6));
+    r.scene_checks = size_t(s.columnInt(7));
+    records.push_back(std::move(r));
+  }
+  return records;
+}
+
+Status SqliteStore::putScene(const std::string& session,
+                             std::shared_ptr<const tsdf::TsdfLayer> scene) {
+  if (scene == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
+  }
+  struct EncodedBlock {
+    tsdf::BlockIndex index;
+    std::string blob;
+  };
+  std::vector<EncodedBlock> blocks;
+  blocks.reserve(scene->numBlocks());
+  for (const auto& [index, block] : scene->blocks()) {
+    blocks.push_back({index, encodeTsdfBlock(*block, options_.blobs)});
+  }
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(session));
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement map,
+        Statement::prepare(*writer_,
+                           absl::StrFormat("INSERT INTO scene_maps(session_id, voxel_size, "
+                                           "voxels_per_side, blocks, updated_at) VALUES "
+                                           "(?, ?, ?, ?, %s) ON CONFLICT(session_id) DO UPDATE "
+                                           "SET voxel_size = excluded.voxel_size, "
+                                           "voxels_per_side = excluded.voxels_per_side, "
+                                           "blocks = excluded.blocks, "
+                                           "updated_at = excluded.updated_at",
+                                           kNow)));
+    map.bind(1, sid).bind(2, double(scene->voxelSize())).bind(3, int64_t(scene->voxelsPerSide()));
+    OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).run());
+    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                              *writer_, "DELETE FROM scene_blocks WHERE session_id = ?"));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, sid).run());
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement insert,
+        Statement::prepare(*writer_, "INSERT INTO scene_blocks(session_id, bx, by, bz, tsdf) "
+                                     "VALUES (?, ?, ?, ?, ?)"));
+    for (const auto& b : blocks) {
+      OBJDB_RETURN_IF_ERROR(insert.reset());
+      insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
+      OBJDB_RETURN_IF_ERROR(insert.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
+    }
+    return txn.commit();
+  };
+  OBJDB_RETURN_IF_ERROR(annotate(body(), absl::StrFormat("storing the scene of session %s", session)));
+  std::lock_guard cache_lock(scene_mutex_);
+  scene_cache_[session] = std::move(scene);
+  return absl::OkStatus();
+}
+
+StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
+    const std::string& session) const {
+  {
+    std::lock_guard lock(scene_mutex_);
+    const auto it = scene_cache_.find(session);
+    if (it != scene_cache_.end()) return it->second;
+  }
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement m,
+      Statement::prepare(*lease,
+                         "SELECT m.session_id, m.voxel_size, m.voxels_per_side FROM scene_maps m "
+                         "JOIN sessions s ON s.id = m.session_id WHERE s.name = ?"));
+  m.bind(1, session);
+  OBJDB_ASSIGN_OR_RETURN(const bool found, m.step());
+  if (!found) return std::shared_ptr<const tsdf::TsdfLayer>();
+  const int64_t sid = m.columnInt(0);
+  const int vps = int(m.columnInt(2));
+  auto layer = tsdf::TsdfLayer::create(float(m.columnDouble(1)), vps);
+  if (!layer.ok()) {
+    return absl::DataLossError(absl::StrFormat("scene of session %s: %s", session,
+                                               layer.status().message()));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement b, Statement::prepare(*lease, "SELECT rowid, bx, by, bz, tsdf FROM scene_blocks "
+                                              "WHERE session_id = ?"));
+  b.bind(1, sid);
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, b.step());
+    if (!row) break;
+    const tsdf::BlockIndex index(int(b.columnInt(1)), int(b.columnInt(2)), int(b.columnInt(3)));
+    tsdf::TsdfBlock& block = layer->allocateBlock(index);
+    const Status decoded = decodeTsdfBlock(b.columnBlob(4), vps, &block);
+    if (!decoded.ok()) {
+      return annotate(decoded, absl::StrFormat("scene of session %s, block (%d, %d, %d) "
+                                               "(scene_blocks row %d)",
+                                               session, index.x(), index.y(), index.z(),
+                                               b.columnInt(0)));
+    }
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  auto shared = std::make_shared<const tsdf::TsdfLayer>(std::move(*layer));
+  std::lock_guard lock(scene_mutex_);
+  scene_cache_.emplace(session, shared);
+  return std::shared_ptr<const tsdf::TsdfLayer>(shared);
+}
+
+StatusOr<SessionInfo> SqliteStore::beginSession(const SessionInfo& info) {
+  if (info.name.empty()) return absl::InvalidArgumentError("session name is empty");
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_, absl::StrFormat("INSERT INTO sessions(name, intrinsics, params, "
+                                                   "started_at, state) VALUES (?, ?, ?, %s, 'open')",
+                                                   kNow)));
+  s.bind(1, info.name).bind(2, info.intrinsics_json).bind(3, info.params_json);
+  OBJDB_RETURN_IF_ERROR(duplicateSession(s.run(), info.name));
+  const int64_t id = sqlite3_last_insert_rowid(writer_->get());
+  OBJDB_RETURN_IF_ERROR(txn.commit());
+  SessionInfo out = info;
+  out.id = id;
+  out.state = SessionState::kOpen;
+  return out;
+}
+
+Status SqliteStore::finishSession(const std::string& name, SessionState state, int64_t frames) {
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_, absl::StrFormat("UPDATE sessions SET state = ?, frames = ?, "
+                                                   "ended_at = %s WHERE name = ?",
+                                                   kNow)));
+  s.bind(1, std::string_view(sessionStateName(state))).bind(2, frames).bind(3, name);
+  OBJDB_RETURN_IF_ERROR(s.run());
+  if (sqlite3_changes(writer_->get()) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no session %s", name));
+  }
+  return absl::OkStatus();
+}
+
+StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, "SELECT id, name, intrinsics, params, started_at, "
+                                 "COALESCE(ended_at, ''), state, frames FROM sessions ORDER BY id"));
+  std::vector<SessionInfo> out;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    SessionInfo info;
+    info.id = s.columnInt(0);
+    info.name = s.columnText(1);
+    info.intrinsics_json = s.columnText(2);
+    info.params_json = s.columnText(3);
+    info.started_at = s.columnText(4);
+    info.ended_at = s.columnText(5);
+    const std::string state = s.columnText(6);
+    info.state = state == "ended"         ? SessionState::kEnded
+                 : state == "interrupted" ? SessionState::kInterrupted
+                                          : SessionState::kOpen;
+    info.frames = s.columnInt(7);
+    out.push_back(std::move(info));
+  }
+  return out;
+}
+
+StatusOr<CheckReport> SqliteStore::check() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  CheckReport report;
+  {
+    OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*lease, "PRAGMA integrity_check"));
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+      if (!row) break;
+      const std::string line = s.columnText(0);
+      if (line != "ok") report.sqlite_findings.push_back(line);
+    }
+    OBJDB_ASSIGN_OR_RETURN(Statement fk, Statement::prepare(*lease, "PRAGMA foreign_key_check"));
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool row, fk.step());
+      if (!row) break;
+      report.sqlite_findings.push_back(absl::StrFormat(
+          "foreign key: %s row %d refers to a missing %s row", fk.columnText(0), fk.columnInt(1),
+          fk.columnText(2)));
+    }
+  }
+  using Decoder = std::function<Status(std::string_view)>;
+  struct Column {
+    const char* table;
+    const char* column;
+    Decoder decode;
+  };
+  const std::vector<Column> columns = {
+      {"models", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
+      {"models", "surface_voxels", [](auto b) { return decodeVoxelList(b).status(); }},
+      {"models", "cloud", [](auto b) { return decodePointCloud(b).status(); }},
+      {"models", "keypoints", [](auto b) { return decodeIndices(b).status(); }},
+      {"models", "descriptors", [](auto b) { return decodeDescriptors(b).status(); }},
+      {"observations", "T_world_object", [](auto b) { return decodeTransform(b).status(); }},
+      {"observations", "T_object_segment", [](auto b) { return decodeTransform(b).status(); }},
+      {"raw_segments", "pose", [](auto b) { return decodeTransform(b).status(); }},
+      {"raw_segments", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
+      {"raw_segments", "voxels", [](auto b) { return decodeVoxelList(b).status(); }},
+      {"merge_records", "transform", [](auto b) { return decodeTransform(b).status(); }},
+  };
+  for (const auto& c : columns) {
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(*lease, absl::StrFormat("SELECT rowid, %s FROM %s WHERE %s IS NOT NULL "
+                                                   "ORDER BY rowid",
+                                                   c.column, c.table, c.column)));
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+      if (!row) break;
+      ++report.blobs_checked;
+      const Status status = c.decode(s.columnBlob(1));
+      if (!status.ok()) {
+        report.damaged.push_back({c.table, s.columnInt(0), c.column, std::string(status.message())});
+      }
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement blocks,
+      Statement::prepare(*lease, "SELECT b.rowid, m.voxels_per_side, b.tsdf FROM scene_blocks b "
+                                 "JOIN scene_maps m ON m.session_id = b.session_id ORDER BY b.rowid"));
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, blocks.step());
+    if (!row) break;
+    ++report.blobs_checked;
+    const int vps = int(blocks.columnInt(1));
+    if (!(vps >= 2 && vps <= 64)) {
+      report.damaged.push_back({"scene_blocks", blocks.columnInt(0), "tsdf",
+                                absl::StrFormat("scene map has %d voxels per side", vps)});
+      continue;
+    }
+    tsdf::TsdfBlock block(vps);
+    const Status status = decodeTsdfBlock(blocks.columnBlob(2), vps, &block);
+    if (!status.ok()) {
+      report.damaged.push_back(
+          {"scene_blocks", blocks.columnInt(0), "tsdf", std::string(status.message())});
+    }
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return report;
+}
+
+StatusOr<StoreStats> SqliteStore::stats() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  StoreStats stats;
+  stats.schema_version = schema_.version_after;
+  OBJDB_ASSIGN_OR_RETURN(const int64_t pages, (*lease).queryInt("PRAGMA page_count", "page_count"));
+  OBJDB_ASSIGN_OR_RETURN(const int64_t page_size, (*lease).queryInt("PRAGMA page_size", "page_size"));
+  stats.file_bytes = pages * page_size;
+  const std::vector<std::pair<const char*, const char*>> tables = {
+      {"sessions", "0"},
+      {"scene_blocks", "length(tsdf)"},
+      {"raw_segments", "length(pose) + length(grid) + length(voxels)"},
+      {"models",
+       "COALESCE(length(grid), 0) + COALESCE(length(surface_voxels), 0) + "
+       "COALESCE(length(cloud), 0) + COALESCE(length(keypoints), 0) + "
+       "COALESCE(length(descriptors), 0)"},
+      {"observations", "length(T_world_object) + length(T_object_segment)"},
+      {"merge_records", "length(transform)"},
+  };
+  for (const auto& [table, bytes] : tables) {
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s, Statement::prepare(*lease, absl::StrFormat(
+                                                    "SELECT COUNT(*), COALESCE(SUM(%s), 0) FROM %s",
+                                                    bytes, table)));
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (row) stats.tables.push_back({table, s.columnInt(0), s.columnInt(1)});
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement states,
+      Statement::prepare(*lease, "SELECT state, COUNT(*) FROM models GROUP BY state"));
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, states.step());
+    if (!row) break;
+    const std::string state = states.columnText(0);
+    const int64_t n = states.columnInt(1);
+    if (state == "active") stats.active_models = n;
+    if (state == "removed") stats.removed_models = n;
+    if (state == "merged") stats.merged_models = n;
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return stats;
+}
+
+Status SqliteStore::checkpoint() {
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  return writer_->exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpointing the WAL");
+}
+
+}  // namespace objdb::storage

@@ -1,0 +1,138 @@
+// The persistent object store (issue 6, DESIGN.md "Persistence"): core/database's ModelStore on
+// one SQLite file in WAL mode. One writer connection (every mutation one BEGIN IMMEDIATE
+// transaction), a pool of reader connections (every read one snapshot), binary data in
+// checksummed, versioned, compressed blobs. A damaged blob fails only the row that holds it, with
+// an error naming table, row and column. Sessions, scene maps (one row per TSDF block), raw
+// segments, models, observations and merge records; `check()` and `stats()` for the admin CLI.
+#pragma once
+
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/database/model_store.h"
+#include "storage/blob_codec.h"
+#include "storage/schema.h"
+#include "storage/sqlite_util.h"
+
+namespace objdb::storage {
+
+struct SqliteStoreOptions {
+  bool create_if_missing = true;  // create an empty database when the file does not exist
+  bool read_only = false;         // no writer connection; mutations fail with FAILED_PRECONDITION
+  std::string synchronous = "FULL";  // FULL: commits survive power loss; NORMAL: survive
+                                     // process crashes, may lose the last commits on power loss
+  int busy_timeout_ms = 5000;     // how long a connection waits for a lock before UNAVAILABLE
+  int64_t journal_size_limit_bytes = 64ll << 20;  // WAL file is truncated to this after checkpoints
+  bool quick_check_on_open = true;  // PRAGMA quick_check before first use; corrupt → DATA_LOSS
+  int max_readers = 8;            // reader connections kept open (more are opened on demand)
+  BlobOptions blobs;              // compression of new blobs
+  Status validate() const;
+};
+
+enum class SessionState { kOpen, kEnded, kInterrupted };
+const char* sessionStateName(SessionState state);
+
+struct SessionInfo {
+  int64_t id = 0;
+  std::string name;
+  std::string intrinsics_json;  // as the client sent them
+  std::string params_json;      // effective parameters of the session
+  std::string started_at, ended_at;  // ISO-8601 UTC; ended_at empty while open
+  SessionState state = SessionState::kOpen;
+  int64_t frames = 0;
+};
+
+// A blob (or a row) that could not be read back.
+struct Damage {
+  std::string table;
+  int64_t row = 0;       // rowid / model id
+  std::string column;
+  std::string problem;
+};
+
+struct CheckReport {
+  std::vector<std::string> sqlite_findings;  // PRAGMA integrity_check lines other than "ok"
+  std::vector<Damage> damaged;              // blobs failing their checks
+  size_t blobs_checked = 0;
+  bool ok() const { return sqlite_findings.empty() && damaged.empty(); }
+};
+
+struct TableStats {
+  std::string table;
+  int64_t rows = 0;
+  int64_t blob_bytes = 0;  // sum of blob lengths in the table
+};
+
+struct StoreStats {
+  int schema_version = 0;
+  int64_t file_bytes = 0;  // page_count · page_size (WAL not included)
+  int64_t active_models = 0, removed_models = 0, merged_models = 0;
+  std::vector<TableStats> tables;
+};
+
+class SqliteStore : public database::ModelStore {
+ public:
+  static StatusOr<std::unique_ptr<SqliteStore>> open(const std::string& path,
+                                                     const SqliteStoreOptions& options = {});
+  // With another migration list (tests of the migration machinery).
+  static StatusOr<std::unique_ptr<SqliteStore>> open(const std::string& path,
+                                                     const SqliteStoreOptions& options,
+                                                     const std::vector<Migration>& migrations);
+  ~SqliteStore() override;
+
+  const std::string& path() const { return path_; }
+  const SchemaState& schema() const { return schema_; }
+
+  // ModelStore.
+  Status putRawSegment(const database::RawSegmentRecord& segment) override;
+  StatusOr<std::shared_ptr<const database::RawSegmentRecord>> rawSegment(
+      const database::SegmentKey& key) const override;
+  StatusOr<int64_t> addModel(model::ObjectModel model) override;
+  Status replaceModel(model::ObjectModel model,
+                      const std::optional<database::MergeRecord>& merge) override;
+  Status removeModel(int64_t id) override;
+  StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
+  StatusOr<std::vector<int64_t>> modelIds() const override;
+  StatusOr<database::MatchEntries> matchEntries() const override;
+  StatusOr<std::vector<database::MergeRecord>> mergeRecords() const override;
+  Status putScene(const std::string& session,
+                  std::shared_ptr<const tsdf::TsdfLayer> scene) override;
+  StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
+      const std::string& session) const override;
+
+  // Sessions. beginSession creates the session (ALREADY_EXISTS when the name is taken);
+  // a session row is also created implicitly, state open, by the first data stored for it.
+  StatusOr<SessionInfo> beginSession(const SessionInfo& info);
+  Status finishSession(const std::string& name, SessionState state, int64_t frames);
+  StatusOr<std::vector<SessionInfo>> sessions() const;
+
+  // SQLite's integrity_check plus every blob's checks.
+  StatusOr<CheckReport> check() const;
+  StatusOr<StoreStats> stats() const;
+  // Copies the WAL into the database and truncates it (clean shutdown).
+  Status checkpoint();
+
+ private:
+  class ReaderLease;
+  SqliteStore(std::string path, SqliteStoreOptions options);
+  StatusOr<ReaderLease> reader() const;
+  Status requireWriter() const;
+  StatusOr<int64_t> sessionIdForWrite(const std::string& name);
+  Status writeObservations(model::ObjectModel* model, bool insert);  // in the caller's txn
+
+  std::string path_;
+  SqliteStoreOptions options_;
+  SchemaState schema_;
+  mutable std::mutex write_mutex_;  // one writer at a time
+  std::optional<Connection> writer_;
+  mutable std::mutex reader_mutex_;
+  mutable std::vector<Connection> idle_readers_;
+  // Decoded scene maps (large; read by every model-to-scene check), dropped on putScene.
+  mutable std::mutex scene_mutex_;
+  mutable std::map<std::string, std::shared_ptr<const tsdf::TsdfLayer>> scene_cache_;
+};
+
+}  // namespace objdb::storage

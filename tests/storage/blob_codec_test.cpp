@@ -1,0 +1,133 @@
+#include "storage/blob_codec.h"
+
+#include <limits>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "tests/storage/store_fixtures.h"
+
+namespace objdb::storage {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(BlobCodec, EveryKindRoundTripsBitExact) {
+  const model::ObjectModel m = objdb::testing::makeStoreModel(7, 3);
+  for (const bool compress : {false, true}) {
+    BlobOptions options;
+    options.compress = compress;
+    const auto grid = decodeTsdfGrid(encodeTsdfGrid(m.grid, options));
+    ASSERT_TRUE(grid.ok()) << grid.status();
+    EXPECT_EQ(objdb::testing::diffLayers(*grid, m.grid), "");
+
+    tsdf::TsdfBlock block(8);
+    const tsdf::TsdfBlock& original = *m.grid.blocks().begin()->second;
+    ASSERT_TRUE(decodeTsdfBlock(encodeTsdfBlock(original, options), 8, &block).ok());
+    for (size_t i = 0; i < original.voxels().size(); ++i) {
+      const auto& a = block.voxels()[i];
+      const auto& b = original.voxels()[i];
+      ASSERT_TRUE(a.distance == b.distance && a.weight == b.weight && a.color == b.color) << i;
+    }
+
+    const auto cloud = decodePointCloud(encodePointCloud(m.cloud, options));
+    ASSERT_TRUE(cloud.ok()) << cloud.status();
+    EXPECT_EQ(cloud->points, m.cloud.points);
+    EXPECT_EQ(cloud->normals, m.cloud.normals);
+    EXPECT_TRUE(cloud->colors == m.cloud.colors);
+
+    EXPECT_EQ(decodeIndices(encodeIndices(m.keypoint_indices, options)).value(), m.keypoint_indices);
+    EXPECT_EQ(decodeDescriptors(encodeDescriptors(m.descriptors, options)).value(), m.descriptors);
+    EXPECT_EQ(decodeVoxelList(encodeVoxelList(m.surface_voxels, options)).value(), m.surface_voxels);
+  }
+  const Transform T = m.observations[1].T_world_object;
+  EXPECT_TRUE(decodeTransform(encodeTransform(T)).value().matrix() == T.matrix());
+}
+
+TEST(BlobCodec, EmptyValuesRoundTrip) {
+  EXPECT_TRUE(decodePointCloud(encodePointCloud(PointCloud{})).value().points.empty());
+  EXPECT_TRUE(decodeIndices(encodeIndices({})).value().empty());
+  EXPECT_TRUE(decodeDescriptors(encodeDescriptors({})).value().empty());
+  const auto grid = decodeTsdfGrid(encodeTsdfGrid(tsdf::TsdfLayer::create(0.01f, 16).value()));
+  ASSERT_TRUE(grid.ok());
+  EXPECT_EQ(grid->numBlocks(), 0u);
+  EXPECT_EQ(grid->voxelsPerSide(), 16);
+}
+
+TEST(BlobCodec, CompressesTsdfGrids) {
+  const model::ObjectModel m = objdb::testing::makeStoreModel(3, 1);
+  tsdf::TsdfLayer sparse = tsdf::TsdfLayer::create(0.01f, 8).value();
+  for (int b = 0; b < 10; ++b) sparse.allocateBlock({b, 0, 0}).voxels()[5].weight = 1.0f;
+  BlobOptions raw;
+  raw.compress = false;
+  EXPECT_LT(encodeTsdfGrid(sparse).size() * 5, encodeTsdfGrid(sparse, raw).size());
+}
+
+TEST(BlobCodec, AFlippedPayloadByteIsAChecksumMismatch) {
+  const model::ObjectModel m = objdb::testing::makeStoreModel(11, 2);
+  for (const bool compress : {false, true}) {
+    BlobOptions options;
+    options.compress = compress;
+    std::string blob = encodeDescriptors(m.descriptors, options);
+    blob[kBlobHeaderBytes + (blob.size() - kBlobHeaderBytes) / 2] ^= 0x10;
+    const auto decoded = decodeDescriptors(blob);
+    ASSERT_FALSE(decoded.ok());
+    EXPECT_EQ(decoded.status().code(), absl::StatusCode::kDataLoss);
+    EXPECT_THAT(decoded.status().message(), HasSubstr("descriptors blob: checksum mismatch"));
+  }
+}
+
+TEST(BlobCodec, DamagedHeadersAreNamed) {
+  const std::string good = encodeIndices({1, 2, 3, 4});
+  auto message = [](const StatusOr<std::vector<uint32_t>>& r) {
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss);
+    return std::string(r.status().message());
+  };
+  EXPECT_THAT(message(decodeIndices(good.substr(0, good.size() - 1))), HasSubstr("header says"));
+  EXPECT_THAT(message(decodeIndices(good.substr(0, 10))), HasSubstr("shorter than the 32-byte header"));
+  EXPECT_THAT(message(decodeIndices("")), HasSubstr("shorter"));
+  std::string version = good;
+  version[4] = 9;
+  EXPECT_THAT(message(decodeIndices(version)), HasSubstr("unsupported blob version 9"));
+  std::string magic = good;
+  magic[0] = 'X';
+  EXPECT_THAT(message(decodeIndices(magic)), HasSubstr("bad magic"));
+  EXPECT_THAT(message(decodeIndices(encodeVoxelList({{1, 2, 3}}))), HasSubstr("expected 4"));
+  // A huge declared size is refused before anything is allocated.
+  std::string huge = good;
+  const uint64_t size = std::numeric_limits<uint64_t>::max();
+  std::memcpy(huge.data() + 16, &size, 8);
+  EXPECT_THAT(message(decodeIndices(huge)), HasSubstr("over the"));
+}
+
+TEST(BlobCodec, CountsBeyondThePayloadAreRefused) {
+  // A well-formed blob whose payload claims more elements than it holds.
+  std::string payload(4, '\0');
+  const uint32_t n = 1u << 30;
+  std::memcpy(payload.data(), &n, 4);
+  const auto decoded = decodeIndices(encodeBlob(BlobKind::kIndices, payload));
+  ASSERT_FALSE(decoded.ok());
+  EXPECT_THAT(decoded.status().message(), HasSubstr("payload ends early"));
+}
+
+TEST(BlobCodec, TransformsMustBeRigid) {
+  Transform T = Transform::Identity();
+  T.linear() *= 1.01;
+  const auto decoded = decodeTransform(encodeTransform(T));
+  ASSERT_FALSE(decoded.ok());
+  EXPECT_THAT(decoded.status().message(), HasSubstr("not orthonormal"));
+  T = Transform::Identity();
+  T.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(decodeTransform(encodeTransform(T)).status().message(), HasSubstr("not finite"));
+}
+
+TEST(BlobCodec, NonFiniteVoxelsAreRefused) {
+  tsdf::TsdfLayer grid = tsdf::TsdfLayer::create(0.02f, 8).value();
+  grid.allocateBlock({0, 0, 0}).voxels()[3].distance = std::numeric_limits<float>::infinity();
+  const auto decoded = decodeTsdfGrid(encodeTsdfGrid(grid));
+  ASSERT_FALSE(decoded.ok());
+  EXPECT_THAT(decoded.status().message(), HasSubstr("voxel 3"));
+}
+
+}  // namespace
+}  // namespace objdb::storage
