@@ -11,5 +11,6 @@ int runGsmCommand(int argc, char** argv);     // gsm_command.cpp
 int runSimCommand(int argc, char** argv);     // sim_command.cpp
 int runInfoCommand(int argc, char** argv);    // info_command.cpp
 int runSegmentCommand(int argc, char** argv); // segment_command.cpp
+int runDbCommand(int argc, char** argv);      // db_command.cpp
 
 }  // namespace objdb

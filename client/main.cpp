@@ -18,6 +18,7 @@ commands:
   fuse     integrate a dataset into a TSDF volume and write its surface as a PLY mesh
   gsm      segment + fuse a dataset into a Global Segmentation Map; label-coloured mesh, segments
   segment  segment one dataset frame and write its steps as PNGs (depth, normals, labels, ...)
+  db       check, describe and export from a database file (read-only)
   help     show this text
 
 Run "objdb <command> --help" for the options of a command.
@@ -41,6 +42,7 @@ int main(int argc, char** argv) {
   if (command == "segment") return objdb::runSegmentCommand(argc - 1, argv + 1);
   if (command == "fuse") return objdb::runFuseCommand(argc - 1, argv + 1);
   if (command == "gsm") return objdb::runGsmCommand(argc - 1, argv + 1);
+  if (command == "db") return objdb::runDbCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }

@@ -1,0 +1,185 @@
+// `objdb db`: administration of a database file, offline and read-only — integrity check
+// (SQLite's and every blob's checksum), counts and sizes, the model list, and export of a model's
+// surface cloud or mesh to PLY. Never writes to the database.
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "client/cli_util.h"
+#include "client/commands.h"
+#include "core/io/mesh_io.h"
+#include "core/tsdf/mesh_extraction.h"
+#include "storage/sqlite_store.h"
+
+namespace objdb {
+namespace {
+
+constexpr const char* kUsage = R"(usage: objdb db check  --db FILE
+       objdb db stats  --db FILE
+       objdb db models --db FILE
+       objdb db export --db FILE --model ID --out FILE.ply [--what cloud|mesh] [--min-weight W]
+
+Administration of an objdb database file (opened read-only; nothing is written).
+
+  check    SQLite's integrity_check and foreign-key check, then every blob's checksum and
+           structure; lists each finding (table, row, column, problem); exit status 1 on any
+  stats    schema version, file size, rows and blob bytes per table, models by state, sessions
+  models   one line per active model: id, observations, points, keypoints, planar, sessions
+  export   a model's surface cloud with normals (--what cloud, the default) or the mesh of its
+           TSDF grid (--what mesh; voxels lighter than --min-weight, default 3, are not meshed),
+           in the model's own frame, as binary PLY
+)";
+
+constexpr const char* kCommand = "db";
+
+int check(const storage::SqliteStore& store) {
+  const auto report = store.check();
+  if (!report.ok()) return cli::reportError(kCommand, report.status());
+  for (const auto& line : report->sqlite_findings) std::printf("sqlite: %s\n", line.c_str());
+  for (const auto& d : report->damaged) {
+    std::printf("damaged: %s row %lld, column %s: %s\n", d.table.c_str(), (long long)d.row,
+                d.column.c_str(), d.problem.c_str());
+  }
+  std::printf("%s: %zu blobs checked, %zu damaged, %zu SQLite findings: %s\n", store.path().c_str(),
+              report->blobs_checked, report->damaged.size(), report->sqlite_findings.size(),
+              report->ok() ? "ok" : "NOT OK");
+  return report->ok() ? 0 : 1;
+}
+
+int stats(const storage::SqliteStore& store) {
+  const auto s = store.stats();
+  if (!s.ok()) return cli::reportError(kCommand, s.status());
+  std::printf("%s: schema %d, %.2f MB (without the WAL)\n", store.path().c_str(), s->schema_version,
+              double(s->file_bytes) / 1e6);
+  std::printf("models: %lld active, %lld removed, %lld merged into others\n",
+              (long long)s->active_models, (long long)s->removed_models,
+              (long long)s->merged_models);
+  std::printf("%-16s %10s %14s\n", "table", "rows", "blob MB");
+  for (const auto& t : s->tables) {
+    std::printf("%-16s %10lld %14.2f\n", t.table.c_str(), (long long)t.rows,
+                double(t.blob_bytes) / 1e6);
+  }
+  const auto sessions = store.sessions();
+  if (!sessions.ok()) return cli::reportError(kCommand, sessions.status());
+  for (const auto& session : *sessions) {
+    std::printf("session %-20s %-11s frames %-6lld started %s%s%s\n", session.name.c_str(),
+                storage::sessionStateName(session.state), (long long)session.frames,
+                session.started_at.c_str(), session.ended_at.empty() ? "" : ", ended ",
+                session.ended_at.c_str());
+  }
+  return 0;
+}
+
+int models(const storage::SqliteStore& store) {
+  const auto ids = store.modelIds();
+  if (!ids.ok()) return cli::reportError(kCommand, ids.status());
+  std::printf("%6s %6s %8s %9s %6s  %s\n", "id", "poses", "points", "keypoints", "planar",
+              "observations (session/label)");
+  int failures = 0;
+  for (int64_t id : *ids) {
+    const auto m = store.model(id);
+    if (!m.ok()) {
+      std::printf("%6lld unreadable: %s\n", (long long)id, std::string(m.status().message()).c_str());
+      ++failures;
+      continue;
+    }
+    std::string observations;
+    for (const auto& o : (*m)->observations) {
+      observations += o.session + "/" + std::to_string(o.label) + " ";
+    }
+    std::printf("%6lld %6zu %8zu %9zu %6s  %s\n", (long long)id, (*m)->observations.size(),
+                (*m)->cloud.points.size(), (*m)->keypoint_indices.size(),
+                (*m)->planar ? "yes" : "no", observations.c_str());
+  }
+  return failures == 0 ? 0 : 1;
+}
+
+int exportModel(const storage::SqliteStore& store, long long id, const std::string& out,
+                const std::string& what, float min_weight) {
+  const auto m = store.model(id);
+  if (!m.ok()) return cli::reportError(kCommand, m.status());
+  Status written;
+  size_t count = 0;
+  if (what == "cloud") {
+    written = io::writePlyCloud(out, (*m)->cloud);
+    count = (*m)->cloud.points.size();
+  } else {
+    tsdf::TsdfLayer grid = (*m)->grid.clone();
+    tsdf::MeshLayer mesher(min_weight);
+    mesher.update(&grid, true);
+    const TriangleMesh mesh = mesher.mesh();
+    written = io::writePlyMesh(out, mesh);
+    count = mesh.vertices.size();
+  }
+  if (!written.ok()) return cli::reportError(kCommand, written);
+  std::printf("model %lld: %s with %zu %s written to %s\n", id, what.c_str(), count,
+              what == "cloud" ? "points" : "vertices", out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int runDbCommand(int argc, char** argv) {
+  if (argc < 2) return cli::usageError(kCommand, "no action given", kUsage);
+  const std::string action = argv[1];
+  if (action == "--help" || action == "-h" || action == "help") {
+    std::fputs(kUsage, stdout);
+    return 0;
+  }
+  if (action != "check" && action != "stats" && action != "models" && action != "export") {
+    return cli::usageError(kCommand, "unknown action \"" + action + "\"", kUsage);
+  }
+  std::string db, out, what = "cloud";
+  long long model_id = -1;
+  double min_weight = 3.0;
+  for (int i = 2; i < argc; ++i) {
+    const std::string name = argv[i];
+    if (name == "--help" || name == "-h") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    }
+    if (i + 1 >= argc) return cli::usageError(kCommand, name + " needs a value", kUsage);
+    const char* value = argv[++i];
+    if (name == "--db") {
+      db = value;
+    } else if (name == "--out") {
+      out = value;
+    } else if (name == "--what") {
+      what = value;
+      if (what != "cloud" && what != "mesh") {
+        return cli::usageError(kCommand, "--what must be cloud or mesh, got " + what, kUsage);
+      }
+    } else if (name == "--model") {
+      if (!cli::parseInt(value, 1, (1ll << 62), &model_id)) {
+        return cli::usageError(kCommand, std::string("--model needs a positive id, got ") + value,
+                               kUsage);
+      }
+    } else if (name == "--min-weight") {
+      char* end = nullptr;
+      min_weight = std::strtod(value, &end);
+      if (end == value || *end != '\0' || !(min_weight >= 0.0 && min_weight <= 1e6)) {
+        return cli::usageError(kCommand, std::string("--min-weight needs a weight >= 0, got ") + value,
+                               kUsage);
+      }
+    } else {
+      return cli::usageError(kCommand, "unknown option " + name, kUsage);
+    }
+  }
+  if (db.empty()) return cli::usageError(kCommand, "--db FILE is required", kUsage);
+  if (action == "export" && (model_id < 0 || out.empty())) {
+    return cli::usageError(kCommand, "export needs --model ID and --out FILE.ply", kUsage);
+  }
+  storage::SqliteStoreOptions options;
+  options.read_only = true;
+  options.create_if_missing = false;
+  // check runs the full integrity check itself and lists what it finds.
+  options.quick_check_on_open = action != "check";
+  const auto store = storage::SqliteStore::open(db, options);
+  if (!store.ok()) return cli::reportError(kCommand, store.status());
+  if (action == "check") return check(**store);
+  if (action == "stats") return stats(**store);
+  if (action == "models") return models(**store);
+  return exportModel(**store, model_id, out, what, float(min_weight));
+}
+
+}  // namespace objdb

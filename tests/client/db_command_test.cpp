@@ -1,0 +1,115 @@
+// `objdb db`: check / stats / models / export on a database written through the store, and its
+// answers for damaged and foreign files.
+#include <gtest/gtest.h>
+#include <sqlite3.h>
+
+#include <filesystem>
+#include <string>
+
+#include "core/io/mesh_io.h"
+#include "storage/sqlite_store.h"
+#include "tests/storage/store_fixtures.h"
+#include "tests/support/subprocess.h"
+#include "tests/support/temp_dir.h"
+
+namespace objdb {
+namespace {
+
+using testing::ProcessResult;
+using testing::runProcess;
+namespace fs = std::filesystem;
+
+const std::string kObjdb = OBJDB_CLIENT_BINARY;
+
+// A database with three models (the second merged once) and a scene.
+void writeDatabase(const fs::path& path) {
+  auto store = storage::SqliteStore::open(path.string()).value();
+  for (uint32_t seed : {1u, 2u, 3u}) ASSERT_TRUE(store->addModel(testing::makeStoreModel(seed, 2)).ok());
+  model::ObjectModel merged = testing::makeStoreModel(4, 3);
+  merged.id = 2;
+  database::MergeRecord record;
+  record.target = 2;
+  record.source = "segment s2/9";
+  ASSERT_TRUE(store->replaceModel(std::move(merged), record).ok());
+  ASSERT_TRUE(store->putScene("s0", std::make_shared<const tsdf::TsdfLayer>(
+                                        testing::makeStoreModel(5, 1).grid.clone())).ok());
+}
+
+TEST(DbCommand, ChecksDescribesAndExports) {
+  testing::TempDir dir;
+  const fs::path db = dir / "objects.sqlite";
+  writeDatabase(db);
+  ProcessResult r = runProcess({kObjdb, "db", "check", "--db", db.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("0 damaged, 0 SQLite findings: ok"), std::string::npos) << r.out;
+
+  r = runProcess({kObjdb, "db", "stats", "--db", db.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("models: 3 active"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("merge_records"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("session s2"), std::string::npos) << r.out;
+
+  r = runProcess({kObjdb, "db", "models", "--db", db.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("s0/"), std::string::npos) << r.out;
+
+  const fs::path cloud = dir / "model2.ply";
+  r = runProcess({kObjdb, "db", "export", "--db", db.string(), "--model", "2", "--out", cloud.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto stored = storage::SqliteStore::open(db.string()).value()->model(2).value();
+  const auto read = io::readMesh(cloud);
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(read->vertices.size(), stored->cloud.points.size());
+  EXPECT_EQ(read->vertices, stored->cloud.points);
+
+  r = runProcess({kObjdb, "db", "export", "--db", db.string(), "--model", "7", "--out", cloud.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("no object model 7"), std::string::npos) << r.err;
+}
+
+TEST(DbCommand, CheckListsDamagedRowsAndExitsOne) {
+  testing::TempDir dir;
+  const fs::path db = dir / "objects.sqlite";
+  writeDatabase(db);
+  sqlite3* raw = nullptr;
+  ASSERT_EQ(sqlite3_open(db.c_str(), &raw), SQLITE_OK);
+  // Flip one byte at the end of model 3's cloud blob.
+  ASSERT_EQ(sqlite3_exec(raw,
+                         "UPDATE models SET cloud = substr(cloud, 1, length(cloud) - 1) || "
+                         "CAST(char((unicode(substr(cloud, -1)) + 1) % 128) AS BLOB) WHERE id = 3",
+                         nullptr, nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(raw);
+  ProcessResult r = runProcess({kObjdb, "db", "check", "--db", db.string()});
+  EXPECT_EQ(r.exit_code, 1) << r.out;
+  EXPECT_NE(r.out.find("damaged: models row 3, column cloud"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1 damaged"), std::string::npos) << r.out;
+  r = runProcess({kObjdb, "db", "models", "--db", db.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.out.find("3 unreadable"), std::string::npos) << r.out;
+}
+
+TEST(DbCommand, BadArgumentsAndWrongFilesAreClearErrors) {
+  testing::TempDir dir;
+  ProcessResult r = runProcess({kObjdb, "db"});
+  EXPECT_EQ(r.exit_code, 2);
+  r = runProcess({kObjdb, "db", "vacuum", "--db", "x"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("unknown action"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "db", "check"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--db FILE is required"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "db", "export", "--db", "x", "--model", "0", "--out", "y.ply"});
+  EXPECT_EQ(r.exit_code, 2);
+  r = runProcess({kObjdb, "db", "stats", "--db", (dir / "missing.sqlite").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("no database at"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "missing.sqlite"));
+  ASSERT_TRUE(testing::writeTextFile(dir / "notes.txt", std::string(3000, 'n')));
+  r = runProcess({kObjdb, "db", "check", "--db", (dir / "notes.txt").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("not a database"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace objdb
