@@ -9,13 +9,16 @@
 // scale; copies of a model share its descriptors, so the prefilter finds the most candidates it
 // can: a worst case).
 //   database_eval [--camera tango|vga] [--frames-per-session N] [--sessions N] [--threads N]
-//                 [--scale N] [--config FILE.json]
+//                 [--scale N] [--config FILE.json] [--db FILE.sqlite]
+// With --db the database lives in that SQLite file (created anew) instead of memory: the same
+// experiment with persistence, every insert and merge one transaction.
 #include <malloc.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <map>
 #include <set>
 #include <string>
@@ -35,6 +38,7 @@
 #include "core/segmentation/depth_segmenter.h"
 #include "core/sim/generator.h"
 #include "core/sim/lounge.h"
+#include "storage/sqlite_store.h"
 
 namespace {
 
@@ -60,6 +64,7 @@ int main(int argc, char** argv) {
   Params params;
   int threads = params.database.threads;
   int scale = 0;
+  std::string db_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--camera" && i + 1 < argc) {
@@ -70,6 +75,8 @@ int main(int argc, char** argv) {
       sessions = std::clamp(std::atoi(argv[++i]), 1, 3);
     } else if (a == "--threads" && i + 1 < argc) {
       threads = std::max(1, std::atoi(argv[++i]));
+    } else if (a == "--db" && i + 1 < argc) {
+      db_path = argv[++i];
     } else if (a == "--scale" && i + 1 < argc) {
       scale = std::max(0, std::atoi(argv[++i]));
     } else if (a == "--config" && i + 1 < argc) {
@@ -81,7 +88,8 @@ int main(int argc, char** argv) {
       params = *loaded;
     } else {
       std::fprintf(stderr, "usage: database_eval [--camera tango|vga] [--frames-per-session N] "
-                           "[--sessions N] [--threads N] [--scale N] [--config FILE.json]\n");
+                           "[--sessions N] [--threads N] [--scale N] [--config FILE.json] "
+                           "[--db FILE.sqlite]\n");
       return 2;
     }
   }
@@ -90,7 +98,19 @@ int main(int argc, char** argv) {
   options.camera = camera;
   const std::vector<sim::Scene> scenes = sim::loungePreset(options).value();
 
-  database::InMemoryModelStore store;
+  std::unique_ptr<database::ModelStore> store_owner;
+  if (db_path.empty()) {
+    store_owner = std::make_unique<database::InMemoryModelStore>();
+  } else {
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(db_path + suffix);
+    auto opened = storage::SqliteStore::open(db_path);
+    if (!opened.ok()) {
+      std::fprintf(stderr, "database_eval: %s\n", std::string(opened.status().message()).c_str());
+      return 1;
+    }
+    store_owner = std::move(*opened);
+  }
+  database::ModelStore& store = *store_owner;
   auto db = database::ObjectDatabase::create(params, &store);
   if (!db.ok()) {
     std::fprintf(stderr, "database_eval: %s\n", std::string(db.status().message()).c_str());
