@@ -109,13 +109,20 @@ void readArray(const char* p, size_t count, T* out) {
 // Block voxels as structure of arrays (distances, weights, colours): compresses far better
 // than interleaved records.
 void putVoxels(std::string* out, const std::vector<tsdf::TsdfVoxel>& voxels) {
-  put(out, uint32_t(voxels.size()));
-  for (const auto& v : voxels) put(out, v.distance);
-  for (const auto& v : voxels) put(out, v.weight);
-  for (const auto& v : voxels) {
-    put(out, v.color.r);
-    put(out, v.color.g);
-    put(out, v.color.b);
+  const size_t n = voxels.size();
+  put(out, uint32_t(n));
+  const size_t start = out->size();
+  out->resize(start + n * 11);
+  char* d = out->data() + start;
+  char* w = d + 4 * n;
+  char* c = w + 4 * n;
+  for (size_t i = 0; i < n; ++i) {
+    const auto& v = voxels[i];
+    std::memcpy(d + 4 * i, &v.distance, 4);
+    std::memcpy(w + 4 * i, &v.weight, 4);
+    c[3 * i] = char(v.color.r);
+    c[3 * i + 1] = char(v.color.g);
+    c[3 * i + 2] = char(v.color.b);
   }
 }
 

@@ -32,6 +32,7 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
   OBJDB_ASSIGN_OR_RETURN(const MatchEntries entries, store->matchEntries());
   for (const auto& e : entries.entries) {
     for (const auto& key : e.segments) db->segment_model_[key] = e.id;
+    db->entries_[e.id] = e;
   }
   for (const auto& skipped : entries.skipped) {
     logger("database")->error("object database: a stored model is unreadable and left out: {}",
@@ -86,6 +87,7 @@ Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_i
   for (const auto& o : held->observations) {
     if (keyOf(o) != key) remaining.push_back(o);
   }
+  std::optional<MatchEntry> entry;
   if (remaining.empty()) {
     OBJDB_RETURN_IF_ERROR(store_->removeModel(model_id));
   } else {
@@ -93,16 +95,23 @@ Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_i
     // the segment that defined it leaves.
     OBJDB_ASSIGN_OR_RETURN(model::ObjectModel rebuilt,
                            buildFromObservations(std::move(remaining), model_id));
+    entry = matchEntryOf(rebuilt);
     OBJDB_RETURN_IF_ERROR(store_->replaceModel(std::move(rebuilt), std::nullopt));
   }
   segment_model_.erase(key);
-  forget(model_id);
+  changed(model_id, std::move(entry));
   return absl::OkStatus();
 }
 
-void ObjectDatabase::forget(int64_t model_id) {
+void ObjectDatabase::changed(int64_t model_id, std::optional<MatchEntry> entry) {
   std::lock_guard lock(mutex_);
   indices_.erase(model_id);
+  if (entry) {
+    entry->id = model_id;
+    entries_[model_id] = std::move(*entry);
+  } else {
+    entries_.erase(model_id);
+  }
   global_dirty_ = true;
 }
 
@@ -121,14 +130,11 @@ std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
 StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model) {
   std::lock_guard lock(mutex_);
   if (global_dirty_) {
+    // From the entries kept in memory (loaded at create, updated by every change this database
+    // makes): no store reads per insert.
     std::vector<model::Fpfh> all;
     global_owner_.clear();
-    auto entries = store_->matchEntries();
-    if (!entries.ok()) return entries.status();
-    for (const auto& skipped : entries->skipped) {
-      logger("database")->warn("prefilter: skipping an unreadable model: {}", std::string(skipped.message()));
-    }
-    for (const auto& e : entries->entries) {
+    for (const auto& [id, e] : entries_) {
       if (!e.matchable(params_.model)) continue;
       for (const auto& d : e.descriptors) {
         all.push_back(d);
@@ -311,9 +317,10 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     }
   }
   if (best == nullptr) {
+    MatchEntry entry = matchEntryOf(incoming);
     OBJDB_ASSIGN_OR_RETURN(report.model_id, store_->addModel(std::move(incoming)));
     segment_model_[key] = report.model_id;
-    forget(report.model_id);
+    changed(report.model_id, std::move(entry));
   } else {
     const size_t slot = size_t(best - report.results.data());
     const model::ObjectModel& target = *loaded[slot];
@@ -334,8 +341,9 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     merge.tsdf_overlap = best->model_verdict.agreement.overlap;
     merge.scene_checks = best->scene_checks;
     for (const auto& o : merged.observations) segment_model_[keyOf(o)] = target.id;
+    MatchEntry entry = matchEntryOf(merged);
     OBJDB_RETURN_IF_ERROR(store_->replaceModel(std::move(merged), merge));
-    forget(target.id);
+    changed(target.id, std::move(entry));
     report.model_id = target.id;
     report.merged = true;
     logger("database")->info("segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {})",

@@ -56,7 +56,8 @@ struct InsertReport {
 
 class ObjectDatabase {
  public:
-  // Params are validated. The store outlives the database.
+  // Params are validated. The store outlives the database, and the database is its only writer
+  // (it keeps the prefilter's entries of every model in memory, loaded here).
   static StatusOr<std::unique_ptr<ObjectDatabase>> create(const Params& params, ModelStore* store);
 
   // Algorithm 1 for one raw segment of `session`. A segment whose (session, label) was inserted
@@ -75,13 +76,17 @@ class ObjectDatabase {
   CandidateResult evaluate(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
                            InsertTimings* timings);
   std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);
-  void forget(int64_t model_id);
+  // A model this database added, replaced (entry given) or removed (no entry): drops its cached
+  // index and updates the prefilter's entries.
+  void changed(int64_t model_id, std::optional<MatchEntry> entry);
 
   Params params_;
   ModelStore* store_;
   std::mutex mutex_;  // guards the caches below
   std::map<int64_t, std::shared_ptr<const matching::DescriptorIndex>> indices_;
   std::map<SegmentKey, int64_t> segment_model_;  // which model holds each segment
+  // What the prefilter needs of every stored model; the database is the store's only writer.
+  std::map<int64_t, MatchEntry> entries_;
   // Global descriptor index for the prefilter: descriptors of every matchable model.
   std::unique_ptr<matching::DescriptorIndex> global_;
   std::vector<int64_t> global_owner_;
