@@ -433,14 +433,27 @@ int main(int argc, char** argv) {
                 scale, ids.size(), secondsSince(t_fill), last_session.size());
     std::vector<double> ms;
     size_t most_candidates = 0;
+    database::InsertReport slowest;
     for (const auto& [session, segment] : last_session) {
       const auto t = Clock::now();
       auto report = big_db->insertSegment(session, segment);
       if (!report.ok() || !report->matchable) continue;
       ms.push_back(1000.0 * secondsSince(t));
       most_candidates = std::max(most_candidates, report->candidates);
+      if (ms.back() == *std::max_element(ms.begin(), ms.end())) slowest = *report;
     }
     std::sort(ms.begin(), ms.end());
+    if (!ms.empty()) {
+      const auto& s = slowest.timings;
+      std::printf("slowest insert: %.0f ms = cloud+planarity %.0f, keypoints %.0f, descriptors %.0f, "
+                  "matching+registration %.0f (summed over %zu candidates), model checks %.0f, "
+                  "scene checks %.0f; the rest (prefilter, loading candidates, merge) %.0f\n",
+                  s.total_ms, s.cloud_ms, s.keypoints_ms, s.descriptors_ms, s.match_register_ms,
+                  slowest.candidates, s.model_verify_ms, s.scene_verify_ms,
+                  s.total_ms - s.cloud_ms - s.keypoints_ms - s.descriptors_ms -
+                      (s.match_register_ms + s.model_verify_ms + s.scene_verify_ms) /
+                          double(std::max(1, params.database.threads)));
+    }
     if (!ms.empty()) {
       double mean = 0;
       for (double v : ms) mean += v;

@@ -12,5 +12,6 @@ int runSimCommand(int argc, char** argv);     // sim_command.cpp
 int runInfoCommand(int argc, char** argv);    // info_command.cpp
 int runSegmentCommand(int argc, char** argv); // segment_command.cpp
 int runDbCommand(int argc, char** argv);      // db_command.cpp
+int runIngestCommand(int argc, char** argv);  // ingest_command.cpp
 
 }  // namespace objdb

@@ -8,7 +8,7 @@
 
 #include "client/cli_util.h"
 #include "client/commands.h"
-#include "client/progress.h"
+#include "client/frame_loop.h"
 #include "core/gsm/gsm.h"
 #include "core/io/dataset.h"
 #include "core/io/mesh_io.h"
@@ -81,8 +81,7 @@ int runGsmCommand(int argc, char** argv) {
     if (ec) return reportError(absl::UnavailableError("cannot create " + segments_out + ": " + ec.message()));
   }
 
-  size_t used = 0, rejected = 0, extracted = 0, merges = 0;
-  double seg_ms = 0, gsm_ms = 0;
+  size_t extracted = 0;
   auto write_segments = [&](std::vector<gsm::RawSegment> segments) -> Status {
     for (auto& segment : segments) {
       ++extracted;
@@ -97,29 +96,11 @@ int runGsmCommand(int argc, char** argv) {
     }
     return absl::OkStatus();
   };
-  cli::ProgressBar bar("segmenting + fusing", (ds.size() + size_t(job.every) - 1) / size_t(job.every));
-  for (size_t i = 0; i < ds.size(); i += size_t(job.every)) {
-    auto frame = ds.loadFrame(i);
-    if (!frame.ok()) return reportError(frame.status());
-    auto seg = segmenter->segment(frame->depth, frame->color ? &*frame->color : nullptr);
-    auto fused = seg.ok() ? map->integrate(frame->depth, seg->labels, frame->T_world_camera,
-                                           frame->color ? &*frame->color : nullptr)
-                          : StatusOr<gsm::GsmFrameResult>(seg.status());
-    if (!fused.ok()) {
-      std::fprintf(stderr, "\nobjdb gsm: frame %zu skipped: %s\n", i,
-                   std::string(fused.status().message()).c_str());
-      ++rejected;
-    } else {
-      ++used;
-      seg_ms += seg->timings.total_ms;
-      gsm_ms += fused->tsdf.milliseconds;
-      merges += fused->merges;
-      if (Status s = write_segments(map->extractIdle()); !s.ok()) return reportError(s);
-    }
-    bar.update(used + rejected);
-  }
-  bar.finish();
-  if (Status s = write_segments(map->extractIdle(true)); !s.ok()) return reportError(s);
+  auto looped = cli::segmentAndFuse(ds, &*segmenter, &*map, size_t(job.every), "gsm",
+                                    "segmenting + fusing", write_segments);
+  if (!looped.ok()) return reportError(looped.status());
+  const size_t used = looped->used, rejected = looped->rejected, merges = looped->merges;
+  const double seg_ms = looped->segmentation_ms, gsm_ms = looped->fusion_ms;
 
   tsdf::MeshLayer meshes(params.tsdf.mesh_min_weight);
   meshes.update(&map->tsdf(), true);

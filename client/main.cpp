@@ -18,6 +18,7 @@ commands:
   fuse     integrate a dataset into a TSDF volume and write its surface as a PLY mesh
   gsm      segment + fuse a dataset into a Global Segmentation Map; label-coloured mesh, segments
   segment  segment one dataset frame and write its steps as PNGs (depth, normals, labels, ...)
+  ingest   run datasets through segmentation, GSM and the object database into a SQLite file
   db       check, describe and export from a database file (read-only)
   help     show this text
 
@@ -43,6 +44,7 @@ int main(int argc, char** argv) {
   if (command == "fuse") return objdb::runFuseCommand(argc - 1, argv + 1);
   if (command == "gsm") return objdb::runGsmCommand(argc - 1, argv + 1);
   if (command == "db") return objdb::runDbCommand(argc - 1, argv + 1);
+  if (command == "ingest") return objdb::runIngestCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # README command (a): installs what is missing, builds, generates the synthetic three-session
-# lounge (paper §IV) into data/lounge and prints what it contains.
+# lounge (paper §IV) into data/lounge, prints what it contains, runs the three sessions through
+# segmentation, GSM and the object database into data/objects.sqlite and describes the result.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -10,3 +11,9 @@ OUT=${OUT:-data/lounge}
 "$BUILD_DIR/bin/objdb" sim --preset lounge --out "$OUT" --overwrite
 echo
 "$BUILD_DIR/bin/objdb" info "$OUT"
+DB=${DB:-data/objects.sqlite}
+rm -f "$DB" "$DB-wal" "$DB-shm"  # the lounge was just regenerated: start a fresh database
+echo
+"$BUILD_DIR/bin/objdb" ingest --db "$DB" "$OUT"
+echo
+"$BUILD_DIR/bin/objdb" db stats --db "$DB"

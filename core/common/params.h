@@ -126,6 +126,10 @@ struct DatabaseParams {
   int prefilter_neighbours = 20;
   int prefilter_min_votes = 3;
   int max_candidates = 32;
+  // Candidates are evaluated in waves of `threads`, most voted first; once this many have been
+  // accepted no further wave starts (0: evaluate all). Bounds the insert time when many stored
+  // models are copies of one object; the waves keep the result independent of thread timing.
+  int stop_after_accepted = 4;
   int threads = 2;  // candidate registrations in parallel
   Status validate() const;
 };

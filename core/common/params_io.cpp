@@ -91,6 +91,7 @@ void forEachField(DatabaseParams& p, Fn&& fn) {
   fn("prefilter_neighbours", p.prefilter_neighbours);
   fn("prefilter_min_votes", p.prefilter_min_votes);
   fn("max_candidates", p.max_candidates);
+  fn("stop_after_accepted", p.stop_after_accepted);
   fn("threads", p.threads);
 }
 template <typename Fn>

@@ -288,19 +288,36 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   report.candidates = candidates.size();
   report.results.resize(candidates.size());
   std::vector<InsertTimings> per_candidate(candidates.size());
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t c = next++; c < candidates.size(); c = next++) {
-      report.results[c] = evaluate(incoming, *loaded[c], &per_candidate[c]);
+  // Waves of `threads` candidates in prefilter order; a wave starts only while fewer than
+  // stop_after_accepted have been accepted, so the outcome never depends on thread timing.
+  const size_t wave = size_t(std::max(1, params_.database.threads));
+  const size_t stop = size_t(params_.database.stop_after_accepted);
+  size_t accepted = 0;
+  for (size_t begin = 0; begin < candidates.size(); begin += wave) {
+    const size_t end = std::min(candidates.size(), begin + wave);
+    if (stop > 0 && accepted >= stop) {
+      for (size_t c = begin; c < candidates.size(); ++c) {
+        report.results[c].model_id = candidates[c];
+        report.results[c].stage = "skipped";
+        report.results[c].reason =
+            absl::StrFormat("not evaluated: %d candidates with more votes were accepted", accepted);
+      }
+      break;
     }
-  };
-  const int threads = std::min<int>(params_.database.threads, int(candidates.size()));
-  if (threads <= 1) {
-    work();
-  } else {
-    std::vector<std::thread> pool;
-    for (int w = 0; w < threads; ++w) pool.emplace_back(work);
-    for (auto& thread : pool) thread.join();
+    std::atomic<size_t> next{begin};
+    auto work = [&] {
+      for (size_t c = next++; c < end; c = next++) {
+        report.results[c] = evaluate(incoming, *loaded[c], &per_candidate[c]);
+      }
+    };
+    if (end - begin <= 1) {
+      work();
+    } else {
+      std::vector<std::thread> pool;
+      for (size_t w = 0; w < end - begin; ++w) pool.emplace_back(work);
+      for (auto& thread : pool) thread.join();
+    }
+    for (size_t c = begin; c < end; ++c) accepted += report.results[c].accepted ? 1 : 0;
   }
   for (const auto& t : per_candidate) {
     report.timings.match_register_ms += t.match_register_ms;

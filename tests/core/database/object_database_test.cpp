@@ -195,6 +195,48 @@ TEST(ObjectDatabase, OneOrTwoThreadsGiveTheSameDatabase) {
   EXPECT_EQ(run(1), run(2));
 }
 
+// Four stored copies of one object (each a separate model, as when a database holds many
+// identical chairs): evaluation stops after stop_after_accepted acceptances, in prefilter order.
+TEST(ObjectDatabase, StopsEvaluatingCandidatesOnceEnoughWereAccepted) {
+  auto run = [](int stop_after) {
+    Params p = params(/*threads=*/1);
+    p.database.stop_after_accepted = stop_after;
+    InMemoryModelStore store;
+    EXPECT_TRUE(store.putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}))).ok());
+    EXPECT_TRUE(store.putScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday}))).ok());
+    {
+      // The copies are put in through a database of their own: one insert, then cloned models.
+      auto seed_db = ObjectDatabase::create(p, &store).value();
+      EXPECT_TRUE(seed_db->insertSegment("monday", segment(7, kMonday, -0.3f, 0.1f)).ok());
+      const auto first = store.model(1).value();
+      for (int c = 0; c < 3; ++c) {
+        model::ObjectModel copy = model::cloneModel(*first);
+        copy.observations[0].label = uint32_t(100 + c);
+        auto raw = *store.rawSegment({"monday", 7}).value();
+        raw.key.label = copy.observations[0].label;
+        EXPECT_TRUE(store.putRawSegment(raw).ok());
+        EXPECT_TRUE(store.addModel(std::move(copy)).ok());
+      }
+    }
+    auto db = ObjectDatabase::create(p, &store).value();
+    auto report = db->insertSegment("tuesday", segment(3, kTuesday, -0.1f, 0.3f));
+    EXPECT_TRUE(report.ok()) << report.status();
+    return *report;
+  };
+  const InsertReport all = run(0);
+  ASSERT_EQ(all.candidates, 4u);
+  for (const auto& r : all.results) EXPECT_TRUE(r.accepted) << r.stage << ": " << r.reason;
+  const InsertReport two = run(2);
+  ASSERT_EQ(two.candidates, 4u);
+  EXPECT_TRUE(two.results[0].accepted);
+  EXPECT_TRUE(two.results[1].accepted);
+  for (size_t c = 2; c < 4; ++c) {
+    EXPECT_EQ(two.results[c].stage, "skipped");
+    EXPECT_THAT(two.results[c].reason, HasSubstr("2 candidates with more votes were accepted"));
+  }
+  EXPECT_TRUE(two.merged);
+}
+
 TEST(ObjectDatabase, BadInputIsAClearError) {
   Fixture f;
   const World a{boxWithBall(), pose(0, 0, 0)};
