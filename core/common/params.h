@@ -101,7 +101,9 @@ struct MatchingParams {
   float coarse_min_agreement = 0.0f;
   float icp_max_correspondence_m = 0.05f;  // ICP pairs farther apart are ignored
   int icp_iterations = 30;
-  int icp_max_source_points = 1500;        // the source cloud is thinned to this for ICP
+  // The source cloud is thinned to this for ICP. 800 (was 1500) measured on the lounge: the same
+  // recall (39 of 82) and 0 erroneous merges, matching + registration 8.3 s instead of 14.5 s.
+  int icp_max_source_points = 800;
   Status validate() const;
 };
 
@@ -125,7 +127,9 @@ struct DatabaseParams {
   // prefilter_min_votes votes are candidates, the max_candidates most voted first.
   int prefilter_neighbours = 20;
   int prefilter_min_votes = 3;
-  int max_candidates = 32;
+  // 16 (was 32) measured: the same recall on the lounge (~10 candidates per insert on average);
+  // the worst insert into a database of 1,000 models drops below 1 s.
+  int max_candidates = 16;
   // Candidates are evaluated in waves of `threads`, most voted first; once this many have been
   // accepted no further wave starts (0: evaluate all). Bounds the insert time when many stored
   // models are copies of one object; the waves keep the result independent of thread timing.
