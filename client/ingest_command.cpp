@@ -185,7 +185,8 @@ int runIngestCommand(int argc, char** argv) {
       return cli::reportError(kCommand, looped.status());
     }
     const Status scene =
-        (*store)->putScene(name, std::make_shared<const tsdf::TsdfLayer>(map->tsdf().clone()));
+        (*store)->putScene(name, std::make_shared<const tsdf::TsdfLayer>(map->tsdf().clone()),
+                           std::make_shared<const gsm::LabelBlocks>(map->mainLabelBlocks()));
     if (!scene.ok()) return cli::reportError(kCommand, scene);
     const Status finished =
         (*store)->finishSession(name, storage::SessionState::kEnded, int64_t(looped->used));

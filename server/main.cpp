@@ -29,7 +29,9 @@ options:
   --allow-remote          accept a non-loopback --listen address such as 0.0.0.0:50051. The
                           server has no authentication yet: anyone who can reach the port can
                           read and write the database.
-  --db PATH               SQLite database file (default %s)
+  --db PATH               SQLite database file, created if missing (default %s); a corrupt
+                          file, another application's database or a newer schema refuses the
+                          start, and the file is left untouched
   --config FILE           pipeline parameters as JSON, e.g. {"tsdf": {"voxel_size_m": 0.01}};
                           checked at startup: unknown keys and bad values refuse the start
   --print-config          print the effective parameters (defaults + --config) as JSON, exit
@@ -172,9 +174,6 @@ int main(int argc, char** argv) {
     return kExitCannotStart;
   }
 
-  auto log = objdb::logger("server");
-  log->info("database {}: not opened, storage is not implemented yet (nothing is stored)",
-            cli.options.db_path);
   objdb::ShutdownSignalWatcher signals;
   objdb::StatusOr<std::unique_ptr<objdb::ObjdbServer>> server =
       objdb::ObjdbServer::start(cli.options);

@@ -12,11 +12,11 @@ const std::map<std::string, std::string>& pendingFeatures() {
   static const auto* features = new std::map<std::string, std::string>{
       {"Ingest", "sessions: frame decoding, depth segmentation and GSM fusion"},
       {"EndSession", "sessions: segment extraction and the object-database insert"},
-      {"ListSessions", "the SQLite store (storage/)"},
-      {"ListObjects", "the SQLite store (storage/) and object models"},
-      {"GetObject", "the SQLite store (storage/) and object models"},
+      {"ListSessions", "queries over the opened database (storage/ is in place)"},
+      {"ListObjects", "queries over the opened database (storage/ is in place)"},
+      {"GetObject", "queries over the opened database (storage/ is in place)"},
       {"GetSceneMesh", "the session map (TSDF meshing) and scene completion"},
-      {"GetStats", "the SQLite store (storage/) and the session pipeline"},
+      {"GetStats", "queries over the opened database and the session pipeline"},
   };
   return *features;
 }

@@ -116,6 +116,9 @@ Status ServerOptions::validate() const {
 StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& options) {
   OBJDB_RETURN_IF_ERROR(options.validate());
   OBJDB_ASSIGN_OR_RETURN(const ListenAddress address, parseListenAddress(options.listen_address));
+  // The database first: a file that cannot be served stops the start before anything listens.
+  OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<storage::SqliteStore> store,
+                         storage::SqliteStore::open(options.db_path));
 
   grpc::EnableDefaultHealthCheckService(true);
   auto service = std::make_unique<PendingObjectDatabaseService>();
@@ -144,16 +147,17 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
     // The server is up, but the API itself does not work yet: say so to anyone who asks.
     health->SetServingStatus(kObjectDatabaseServiceName, false);
   }
-  std::unique_ptr<ObjdbServer> result(
-      new ObjdbServer(options, std::move(service), std::move(server), address.host, port));
+  std::unique_ptr<ObjdbServer> result(new ObjdbServer(
+      options, std::move(store), std::move(service), std::move(server), address.host, port));
   logger("server")->info("listening on {}", result->address());
   return result;
 }
 
-ObjdbServer::ObjdbServer(ServerOptions options,
+ObjdbServer::ObjdbServer(ServerOptions options, std::unique_ptr<storage::SqliteStore> store,
                          std::unique_ptr<PendingObjectDatabaseService> service,
                          std::unique_ptr<grpc::Server> server, std::string host, int port)
     : options_(std::move(options)),
+      store_(std::move(store)),
       service_(std::move(service)),
       server_(std::move(server)),
       host_(std::move(host)),
@@ -174,6 +178,11 @@ void ObjdbServer::shutdown() {
   }
   server_->Shutdown(std::chrono::system_clock::now() + options_.drain_deadline);
   server_->Wait();
+  // Copy the WAL back into the database file, so a clean stop leaves one self-contained file.
+  if (const Status checkpointed = store_->checkpoint(); !checkpointed.ok()) {
+    log->warn("checkpoint of {} at shutdown failed: {}", options_.db_path,
+              std::string(checkpointed.message()));
+  }
   stopped_ = true;
   log->info("stopped serving {}", address());
 }

@@ -12,6 +12,7 @@
 
 #include "core/common/params.h"
 #include "core/common/status.h"
+#include "storage/sqlite_store.h"
 
 namespace grpc {
 class Server;
@@ -38,7 +39,8 @@ struct ServerOptions {
   // Without authentication (a later issue) only loopback addresses are accepted unless this is
   // set: anyone who can reach the port can read and write the database.
   bool allow_remote = false;
-  // SQLite database file; created if missing. Not opened yet: storage lands in a later issue.
+  // SQLite database file, opened at start (created if missing). A corrupt file, another
+  // application's database or a newer schema stops the start with the reason (docs/storage.md).
   std::string db_path = "objdb.sqlite";
   // Largest message accepted / sent, bytes (gRPC's default receive limit of 4 MiB is below one
   // 1280×720 depth + colour frame). Larger messages fail with RESOURCE_EXHAUSTED.
@@ -64,8 +66,10 @@ inline constexpr std::chrono::milliseconds kMaxDrainDeadline{10 * 60 * 1000};
 // A running server. Thread-safe; shutdown() may be called from any thread, any number of times.
 class ObjdbServer {
  public:
-  // Validates the options, binds the address and starts serving (health: SERVING).
-  // UNAVAILABLE when the address cannot be bound (in use, not a local interface, no permission).
+  // Validates the options, opens the database, binds the address and starts serving (health:
+  // SERVING). The database's errors as storage reports them (DATA_LOSS for a corrupt file,
+  // FAILED_PRECONDITION for a foreign or newer one); UNAVAILABLE when the address cannot be
+  // bound (in use, not a local interface, no permission).
   static StatusOr<std::unique_ptr<ObjdbServer>> start(const ServerOptions& options);
 
   ~ObjdbServer();  // shuts down (with the drain deadline) if still running
@@ -84,11 +88,16 @@ class ObjdbServer {
   void shutdown();
   bool stopped() const;
 
+  // The database the server opened; its writes go through the server's single writer.
+  storage::SqliteStore& store() { return *store_; }
+
  private:
-  ObjdbServer(ServerOptions options, std::unique_ptr<PendingObjectDatabaseService> service,
+  ObjdbServer(ServerOptions options, std::unique_ptr<storage::SqliteStore> store,
+              std::unique_ptr<PendingObjectDatabaseService> service,
               std::unique_ptr<grpc::Server> server, std::string host, int port);
 
   const ServerOptions options_;
+  std::unique_ptr<storage::SqliteStore> store_;  // outlives the services that use it
   // Declared before server_: services must outlive the grpc::Server that calls them.
   std::unique_ptr<PendingObjectDatabaseService> service_;
   std::unique_ptr<grpc::Server> server_;

@@ -159,6 +159,7 @@ const char* blobKindName(BlobKind kind) {
     case BlobKind::kDescriptors: return "descriptors";
     case BlobKind::kVoxelList: return "voxel list";
     case BlobKind::kTransform: return "transform";
+    case BlobKind::kLabelBlock: return "label block";
   }
   return "unknown";
 }
@@ -354,23 +355,41 @@ StatusOr<PointCloud> decodePointCloud(std::string_view blob) {
   return cloud;
 }
 
-std::string encodeIndices(const std::vector<uint32_t>& indices, const BlobOptions& options) {
+namespace {
+
+std::string encodeU32List(BlobKind kind, const std::vector<uint32_t>& values,
+                          const BlobOptions& options) {
   std::string payload;
-  put(&payload, uint32_t(indices.size()));
-  putArray(&payload, indices.data(), indices.size());
-  return encodeBlob(BlobKind::kIndices, payload, options);
+  put(&payload, uint32_t(values.size()));
+  putArray(&payload, values.data(), values.size());
+  return encodeBlob(kind, payload, options);
 }
 
-StatusOr<std::vector<uint32_t>> decodeIndices(std::string_view blob) {
-  constexpr BlobKind kKind = BlobKind::kIndices;
+StatusOr<std::vector<uint32_t>> decodeU32List(BlobKind kind, std::string_view blob) {
+  const BlobKind kKind = kind;
   OBJDB_ASSIGN_OR_RETURN(const std::string payload, decodeBlob(kKind, blob));
   Reader reader(kKind, payload);
   OBJDB_ASSIGN_OR_RETURN(const uint32_t n, reader.read<uint32_t>());
   OBJDB_ASSIGN_OR_RETURN(const char* bytes, reader.span(n, 4));
-  std::vector<uint32_t> indices(n);
-  readArray(bytes, n, indices.data());
+  std::vector<uint32_t> values(n);
+  readArray(bytes, n, values.data());
   OBJDB_RETURN_IF_ERROR(reader.finish());
-  return indices;
+  return values;
+}
+
+}  // namespace
+
+std::string encodeIndices(const std::vector<uint32_t>& indices, const BlobOptions& options) {
+  return encodeU32List(BlobKind::kIndices, indices, options);
+}
+StatusOr<std::vector<uint32_t>> decodeIndices(std::string_view blob) {
+  return decodeU32List(BlobKind::kIndices, blob);
+}
+std::string encodeLabelBlock(const std::vector<uint32_t>& labels, const BlobOptions& options) {
+  return encodeU32List(BlobKind::kLabelBlock, labels, options);
+}
+StatusOr<std::vector<uint32_t>> decodeLabelBlock(std::string_view blob) {
+  return decodeU32List(BlobKind::kLabelBlock, blob);
 }
 
 std::string encodeDescriptors(const std::vector<model::Fpfh>& descriptors,

@@ -27,6 +27,7 @@ enum class BlobKind : uint16_t {
   kDescriptors = 5,  // FPFH histograms
   kVoxelList = 6,    // global voxel indices
   kTransform = 7,    // a rigid transform, 12 doubles (rotation column-major, translation)
+  kLabelBlock = 8,   // one block of a scene map's main labels (uint32 per voxel)
 };
 
 const char* blobKindName(BlobKind kind);
@@ -66,6 +67,10 @@ StatusOr<PointCloud> decodePointCloud(std::string_view blob);
 
 std::string encodeIndices(const std::vector<uint32_t>& indices, const BlobOptions& options = {});
 StatusOr<std::vector<uint32_t>> decodeIndices(std::string_view blob);
+
+// A scene map block's labels (one per voxel, the block's voxel order).
+std::string encodeLabelBlock(const std::vector<uint32_t>& labels, const BlobOptions& options = {});
+StatusOr<std::vector<uint32_t>> decodeLabelBlock(std::string_view blob);
 
 std::string encodeDescriptors(const std::vector<model::Fpfh>& descriptors,
                               const BlobOptions& options = {});

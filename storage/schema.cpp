@@ -34,6 +34,14 @@ CREATE TABLE scene_blocks (
   tsdf BLOB NOT NULL,
   PRIMARY KEY (session_id, bx, by, bz)
 );
+CREATE TABLE scene_label_blocks (
+  session_id INTEGER NOT NULL REFERENCES scene_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  labels BLOB NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
 CREATE TABLE raw_segments (
   id INTEGER PRIMARY KEY AUTOINCREMENT,
   session_id INTEGER NOT NULL REFERENCES sessions(id),

@@ -577,7 +577,8 @@ StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecords() const {
 }
 
 Status SqliteStore::putScene(const std::string& session,
-                             std::shared_ptr<const tsdf::TsdfLayer> scene) {
+                             std::shared_ptr<const tsdf::TsdfLayer> scene,
+                             std::shared_ptr<const gsm::LabelBlocks> labels) {
   if (scene == nullptr) {
     return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
   }
@@ -589,6 +590,19 @@ Status SqliteStore::putScene(const std::string& session,
   blocks.reserve(scene->numBlocks());
   for (const auto& [index, block] : scene->blocks()) {
     blocks.push_back({index, encodeTsdfBlock(*block, options_.blobs)});
+  }
+  std::vector<EncodedBlock> label_blocks;
+  if (labels != nullptr) {
+    const size_t voxels = size_t(scene->voxelsPerSide()) * scene->voxelsPerSide() *
+                          scene->voxelsPerSide();
+    for (const auto& [index, block] : *labels) {
+      if (block.size() != voxels) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "scene of session %s: label block (%d, %d, %d) has %d labels, the grid's blocks %d",
+            session, index.x(), index.y(), index.z(), block.size(), voxels));
+      }
+      label_blocks.push_back({index, encodeLabelBlock(block, options_.blobs)});
+    }
   }
   std::lock_guard lock(write_mutex_);
   OBJDB_RETURN_IF_ERROR(requireWriter());
@@ -621,12 +635,67 @@ Status SqliteStore::putScene(const std::string& session,
       insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
       OBJDB_RETURN_IF_ERROR(insert.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
     }
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement del_labels,
+        Statement::prepare(*writer_, "DELETE FROM scene_label_blocks WHERE session_id = ?"));
+    OBJDB_RETURN_IF_ERROR(del_labels.bind(1, sid).run());
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement insert_labels,
+        Statement::prepare(*writer_, "INSERT INTO scene_label_blocks(session_id, bx, by, bz, "
+                                     "labels) VALUES (?, ?, ?, ?, ?)"));
+    for (const auto& b : label_blocks) {
+      OBJDB_RETURN_IF_ERROR(insert_labels.reset());
+      insert_labels.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
+      OBJDB_RETURN_IF_ERROR(insert_labels.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
+    }
     return txn.commit();
   };
   OBJDB_RETURN_IF_ERROR(annotate(body(), absl::StrFormat("storing the scene of session %s", session)));
   std::lock_guard cache_lock(scene_mutex_);
   scene_cache_[session] = std::move(scene);
+  label_cache_[session] = std::move(labels);
   return absl::OkStatus();
+}
+
+StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
+    const std::string& session) const {
+  {
+    std::lock_guard lock(scene_mutex_);
+    const auto it = label_cache_.find(session);
+    if (it != label_cache_.end()) return it->second;
+  }
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement b,
+      Statement::prepare(*lease,
+                         "SELECT l.rowid, l.bx, l.by, l.bz, l.labels, m.voxels_per_side "
+                         "FROM scene_label_blocks l JOIN scene_maps m ON m.session_id = l.session_id "
+                         "JOIN sessions s ON s.id = l.session_id WHERE s.name = ?"));
+  b.bind(1, session);
+  auto labels = std::make_shared<gsm::LabelBlocks>();
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, b.step());
+    if (!row) break;
+    const tsdf::BlockIndex index(int(b.columnInt(1)), int(b.columnInt(2)), int(b.columnInt(3)));
+    auto decoded = decodeLabelBlock(b.columnBlob(4));
+    const int64_t vps = b.columnInt(5);
+    if (decoded.ok() && decoded->size() != size_t(vps * vps * vps)) {
+      decoded = absl::DataLossError(absl::StrFormat("%d labels, expected %d", decoded->size(),
+                                                    vps * vps * vps));
+    }
+    if (!decoded.ok()) {
+      return annotate(decoded.status(),
+                      absl::StrFormat("labels of session %s, block (%d, %d, %d) "
+                                      "(scene_label_blocks row %d)",
+                                      session, index.x(), index.y(), index.z(), b.columnInt(0)));
+    }
+    labels->emplace(index, std::move(*decoded));
+  }
+  std::shared_ptr<const gsm::LabelBlocks> out;
+  if (!labels->empty()) out = std::move(labels);
+  std::lock_guard lock(scene_mutex_);
+  label_cache_.emplace(session, out);
+  return out;
 }
 
 StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
@@ -779,6 +848,7 @@ StatusOr<CheckReport> SqliteStore::check() const {
       {"raw_segments", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
       {"raw_segments", "voxels", [](auto b) { return decodeVoxelList(b).status(); }},
       {"merge_records", "transform", [](auto b) { return decodeTransform(b).status(); }},
+      {"scene_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
   };
   for (const auto& c : columns) {
     OBJDB_ASSIGN_OR_RETURN(
@@ -832,6 +902,7 @@ StatusOr<StoreStats> SqliteStore::stats() const {
   const std::vector<std::pair<const char*, const char*>> tables = {
       {"sessions", "0"},
       {"scene_blocks", "length(tsdf)"},
+      {"scene_label_blocks", "length(labels)"},
       {"raw_segments", "length(pose) + length(grid) + length(voxels)"},
       {"models",
        "COALESCE(length(grid), 0) + COALESCE(length(surface_voxels), 0) + "

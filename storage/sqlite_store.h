@@ -98,9 +98,11 @@ class SqliteStore : public database::ModelStore {
   StatusOr<std::vector<int64_t>> modelIds() const override;
   StatusOr<database::MatchEntries> matchEntries() const override;
   StatusOr<std::vector<database::MergeRecord>> mergeRecords() const override;
-  Status putScene(const std::string& session,
-                  std::shared_ptr<const tsdf::TsdfLayer> scene) override;
+  Status putScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene,
+                  std::shared_ptr<const gsm::LabelBlocks> labels = nullptr) override;
   StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
+      const std::string& session) const override;
+  StatusOr<std::shared_ptr<const gsm::LabelBlocks>> sceneLabels(
       const std::string& session) const override;
 
   // Sessions. beginSession creates the session (ALREADY_EXISTS when the name is taken);
@@ -133,6 +135,7 @@ class SqliteStore : public database::ModelStore {
   // Decoded scene maps (large; read by every model-to-scene check), dropped on putScene.
   mutable std::mutex scene_mutex_;
   mutable std::map<std::string, std::shared_ptr<const tsdf::TsdfLayer>> scene_cache_;
+  mutable std::map<std::string, std::shared_ptr<const gsm::LabelBlocks>> label_cache_;
 };
 
 }  // namespace objdb::storage

@@ -105,13 +105,23 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> InMemoryModelStore::scene(
 }
 
 Status InMemoryModelStore::putScene(const std::string& session,
-                                    std::shared_ptr<const tsdf::TsdfLayer> scene) {
+                                    std::shared_ptr<const tsdf::TsdfLayer> scene,
+                                    std::shared_ptr<const gsm::LabelBlocks> labels) {
   if (scene == nullptr) {
     return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
   }
   std::lock_guard lock(mutex_);
   scenes_[session] = std::move(scene);
+  scene_labels_[session] = std::move(labels);
   return absl::OkStatus();
+}
+
+StatusOr<std::shared_ptr<const gsm::LabelBlocks>> InMemoryModelStore::sceneLabels(
+    const std::string& session) const {
+  std::lock_guard lock(mutex_);
+  const auto it = scene_labels_.find(session);
+  if (it == scene_labels_.end()) return std::shared_ptr<const gsm::LabelBlocks>();
+  return it->second;
 }
 
 }  // namespace objdb::database

@@ -14,6 +14,7 @@
 
 #include "core/common/status.h"
 #include "core/common/transform.h"
+#include "core/gsm/gsm.h"
 #include "core/model/object_model.h"
 #include "core/tsdf/tsdf_layer.h"
 
@@ -87,11 +88,15 @@ class ModelStore {
   virtual StatusOr<MatchEntries> matchEntries() const = 0;
   virtual StatusOr<std::vector<MergeRecord>> mergeRecords() const = 0;
 
-  // Stores the scene map of a session, replacing an earlier one.
-  virtual Status putScene(const std::string& session,
-                          std::shared_ptr<const tsdf::TsdfLayer> scene) = 0;
+  // Stores the scene map of a session (its TSDF and, when given, the GSM's main label of every
+  // voxel), replacing an earlier one.
+  virtual Status putScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene,
+                          std::shared_ptr<const gsm::LabelBlocks> labels = nullptr) = 0;
   // The scene map of a session (null when the session has none).
   virtual StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
+      const std::string& session) const = 0;
+  // Its labels (null when none were stored).
+  virtual StatusOr<std::shared_ptr<const gsm::LabelBlocks>> sceneLabels(
       const std::string& session) const = 0;
 };
 
@@ -107,9 +112,11 @@ class InMemoryModelStore : public ModelStore {
   StatusOr<std::vector<int64_t>> modelIds() const override;
   StatusOr<MatchEntries> matchEntries() const override;
   StatusOr<std::vector<MergeRecord>> mergeRecords() const override;
-  Status putScene(const std::string& session,
-                  std::shared_ptr<const tsdf::TsdfLayer> scene) override;
+  Status putScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene,
+                  std::shared_ptr<const gsm::LabelBlocks> labels = nullptr) override;
   StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
+      const std::string& session) const override;
+  StatusOr<std::shared_ptr<const gsm::LabelBlocks>> sceneLabels(
       const std::string& session) const override;
 
  private:
@@ -118,6 +125,7 @@ class InMemoryModelStore : public ModelStore {
   std::map<int64_t, std::shared_ptr<const model::ObjectModel>> models_;
   std::vector<MergeRecord> merges_;
   std::map<std::string, std::shared_ptr<const tsdf::TsdfLayer>> scenes_;
+  std::map<std::string, std::shared_ptr<const gsm::LabelBlocks>> scene_labels_;
   int64_t next_id_ = 1;
 };
 

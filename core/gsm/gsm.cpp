@@ -128,6 +128,21 @@ Label Gsm::mainLabel(const tsdf::VoxelIndex& v) const {
   return voxel ? mainOf(*voxel) : 0;
 }
 
+LabelBlocks Gsm::mainLabelBlocks() const {
+  LabelBlocks out;
+  out.reserve(label_blocks_.size());
+  for (const auto& [index, voxels] : label_blocks_) {
+    std::vector<Label> labels(voxels.size());
+    bool any = false;
+    for (size_t i = 0; i < voxels.size(); ++i) {
+      labels[i] = mainOf(voxels[i]);
+      any = any || labels[i] != 0;
+    }
+    if (any) out.emplace(index, std::move(labels));
+  }
+  return out;
+}
+
 Label Gsm::newLabel() {
   const Label label = next_label_++;
   parent_.push_back(label);

@@ -50,6 +50,10 @@ struct LabelInfo {
   absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;  // where it has votes
 };
 
+// The main label (after merges; 0 = none) of every voxel of each label block, in the block's
+// voxel order: the labels of a scene map as the store keeps them.
+using LabelBlocks = absl::flat_hash_map<tsdf::BlockIndex, std::vector<Label>, tsdf::BlockIndexHash>;
+
 class Gsm {
  public:
   static StatusOr<Gsm> create(const TsdfParams& tsdf_params, const GsmParams& gsm_params,
@@ -73,6 +77,8 @@ class Gsm {
   Label resolve(Label label) const;
   // Main label of a voxel after merges (0 = none or unallocated).
   Label mainLabel(const tsdf::VoxelIndex& v) const;
+  // mainLabel of every voxel, block by block (blocks without any label are left out).
+  LabelBlocks mainLabelBlocks() const;
   const LabelVoxel* labelVoxel(const tsdf::VoxelIndex& v) const;
 
   const tsdf::TsdfLayer& tsdf() const { return layer_; }

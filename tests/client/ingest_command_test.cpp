@@ -38,6 +38,7 @@ TEST(IngestCommand, TwoSessionsOfTheSameSceneMergeTheirObjects) {
   EXPECT_EQ(sessions_stored[1].state, storage::SessionState::kEnded);
   EXPECT_EQ(sessions_stored[1].frames, 20);
   EXPECT_NE(store->scene("tuesday").value(), nullptr);
+  EXPECT_NE(store->sceneLabels("tuesday").value(), nullptr);
   // Each box is one model seen in both sessions; the floor is planar and stays apart.
   size_t both = 0;
   const std::vector<int64_t> ids = store->modelIds().value();

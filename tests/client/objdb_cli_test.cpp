@@ -7,6 +7,7 @@
 
 #include "server/server.h"
 #include "tests/support/subprocess.h"
+#include "tests/support/temp_dir.h"
 
 namespace objdb {
 namespace {
@@ -21,8 +22,11 @@ bool contains(const std::string& text, const std::string& part) {
 }
 
 std::unique_ptr<ObjdbServer> startLoopbackServer() {
+  static testing::TempDir dir;  // the servers' database files, removed at exit
+  static int next = 0;
   ServerOptions options;
   options.listen_address = "127.0.0.1:0";
+  options.db_path = (dir / ("server" + std::to_string(next++) + ".sqlite")).string();
   StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
   EXPECT_TRUE(server.ok()) << server.status();
   return server.ok() ? *std::move(server) : nullptr;

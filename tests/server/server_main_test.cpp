@@ -1,6 +1,9 @@
 // The objdb-server binary: usage, command-line errors, config checks, serving until SIGTERM/SIGINT.
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
+
+#include <fstream>
+#include <iterator>
 #include <signal.h>
 #include <string.h>
 
@@ -147,6 +150,19 @@ TEST(ObjdbServerBinary, NonLoopbackAddressNeedsAllowRemote) {
   EXPECT_FALSE(contains(result.err, "listening on")) << result.err;
 }
 
+TEST(ObjdbServerBinary, ADatabaseFileItCannotServeRefusesTheStartUntouched) {
+  TempDir dir;
+  const std::string notes = (dir / "notes.txt").string();
+  ASSERT_TRUE(writeTextFile(notes, std::string(4096, 'n')));
+  ProcessResult result = runProcess({kServer, "--listen", "127.0.0.1:0", "--db", notes});
+  EXPECT_EQ(result.exit_code, 1);
+  EXPECT_TRUE(contains(result.err, notes)) << result.err;
+  EXPECT_TRUE(contains(result.err, "not a database")) << result.err;
+  EXPECT_FALSE(contains(result.err, "listening on")) << result.err;
+  std::ifstream in(notes);
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), std::string(4096, 'n'));
+}
+
 TEST(ObjdbServerBinary, MalformedListenAddressRefusesToStart) {
   const ProcessResult result = runProcess({kServer, "--listen=localhost"});
   EXPECT_EQ(result.exit_code, 1);
@@ -206,7 +222,9 @@ struct OpenWatch {
 };
 
 TEST(ObjdbServerBinary, CallStillOpenAtTheDrainDeadlineIsCancelledAndTheServerExitsZero) {
-  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--drain-deadline-ms", "300"});
+  TempDir dir;
+  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--db", (dir / "db.sqlite").string(),
+                       "--drain-deadline-ms", "300"});
   const std::string address = startServer(&server);
   ASSERT_FALSE(address.empty()) << server.stderrText();
   OpenWatch watch(address);
@@ -228,7 +246,9 @@ TEST(ObjdbServerBinary, CallStillOpenAtTheDrainDeadlineIsCancelledAndTheServerEx
 }
 
 TEST(ObjdbServerBinary, SecondSignalExitsAtOnceDuringADrain) {
-  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--drain-deadline-ms", "600000"});
+  TempDir dir;
+  ChildProcess server({kServer, "--listen", "127.0.0.1:0", "--db", (dir / "db.sqlite").string(),
+                       "--drain-deadline-ms", "600000"});
   const std::string address = startServer(&server);
   ASSERT_FALSE(address.empty()) << server.stderrText();
   OpenWatch watch(address);

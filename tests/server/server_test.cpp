@@ -13,6 +13,7 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "server/pending_object_database.h"
+#include "tests/support/temp_dir.h"
 
 namespace objdb {
 namespace {
@@ -23,9 +24,17 @@ using grpc::health::v1::HealthCheckResponse;
 
 constexpr auto kCallDeadline = std::chrono::seconds(10);
 
+// A fresh database file per server, in a folder removed when the test binary exits.
+std::string scratchDbPath() {
+  static testing::TempDir dir;
+  static int next = 0;
+  return (dir / ("server" + std::to_string(next++) + ".sqlite")).string();
+}
+
 ServerOptions loopbackOptions() {
   ServerOptions options;
   options.listen_address = "127.0.0.1:0";
+  options.db_path = scratchDbPath();
   options.drain_deadline = std::chrono::seconds(30);
   return options;
 }

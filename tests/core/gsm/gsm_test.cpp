@@ -126,6 +126,26 @@ TEST(Gsm, TwoSegmentsOfOneObjectGetMergedAfterAFewFrames) {
   ASSERT_FALSE(bounds.isEmpty());
   EXPECT_NEAR(bounds.sizes().z(), 20, 3);
   EXPECT_GE(bounds.sizes().x(), 18);
+  // The label blocks a scene map stores give every voxel its main label after the merge.
+  const LabelBlocks blocks = gsm.mainLabelBlocks();
+  ASSERT_FALSE(blocks.empty());
+  size_t labelled = 0;
+  const int vps = gsm.tsdf().voxelsPerSide();
+  for (const auto& [index, labels] : blocks) {
+    ASSERT_EQ(labels.size(), size_t(vps * vps * vps));
+    for (int z = 0; z < vps; ++z) {
+      for (int y = 0; y < vps; ++y) {
+        for (int x = 0; x < vps; ++x) {
+          const tsdf::VoxelIndex v = index * vps + tsdf::VoxelIndex(x, y, z);
+          const Label l = labels[gsm.tsdf().linearInBlock(v)];
+          ASSERT_EQ(l, gsm.mainLabel(v));
+          ASSERT_NE(l, right == gsm.resolve(left) ? left : right);  // the merged-away label
+          labelled += l != 0 ? 1 : 0;
+        }
+      }
+    }
+  }
+  EXPECT_GT(labelled, box_voxels);  // box and floor
 }
 
 TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {
