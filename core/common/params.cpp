@@ -80,7 +80,8 @@ Status KeypointParams::validate() const {
   OBJDB_RETURN_IF_ERROR(positive(iss_border_radius_m, "keypoints.iss_border_radius_m"));
   OBJDB_RETURN_IF_ERROR(positive(iss_salient_radius_m, "keypoints.iss_salient_radius_m"));
   OBJDB_RETURN_IF_ERROR(positive(iss_non_max_radius_m, "keypoints.iss_non_max_radius_m"));
-  return inRange(iss_min_neighbors, 1, 10000, "keypoints.iss_min_neighbors");
+  OBJDB_RETURN_IF_ERROR(inRange(iss_min_neighbors, 1, 10000, "keypoints.iss_min_neighbors"));
+  return inRange(uniform_spacing_m, 0.0, 1.0, "keypoints.uniform_spacing_m");
 }
 
 Status DescriptorParams::validate() const {

@@ -78,6 +78,9 @@ struct KeypointParams {
   float iss_salient_radius_m = 0.06f;    // r_s
   float iss_non_max_radius_m = 0.08f;    // r_nm
   int iss_min_neighbors = 5;             // k_NN^min (ISS)
+  // Ours, not in table I: also one keypoint per cube of this side (the cloud point nearest the
+  // cube's centre), so that small or smooth segments get enough correspondences; 0 = off.
+  float uniform_spacing_m = 0.0f;
   Status validate() const;
 };
 

@@ -62,6 +62,7 @@ void forEachField(KeypointParams& p, Fn&& fn) {
   fn("iss_salient_radius_m", p.iss_salient_radius_m);
   fn("iss_non_max_radius_m", p.iss_non_max_radius_m);
   fn("iss_min_neighbors", p.iss_min_neighbors);
+  fn("uniform_spacing_m", p.uniform_spacing_m);
 }
 template <typename Fn>
 void forEachField(DescriptorParams& p, Fn&& fn) {

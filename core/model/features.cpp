@@ -4,6 +4,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include "absl/container/flat_hash_map.h"
+#include "core/common/grid_key.h"
+
 #include <pcl/features/fpfh.h>
 #include <pcl/keypoints/harris_3d.h>
 #include <pcl/keypoints/iss_3d.h>
@@ -126,6 +129,28 @@ std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointPar
     counts->iss = from_iss.size();
     counts->harris = from_harris.size();
     counts->both = from_iss.size() + from_harris.size() - result.size();
+  }
+  if (params.uniform_spacing_m > 0.0f) {
+    // The point nearest each cube's centre (ties: the lower index), deterministic.
+    const float s = params.uniform_spacing_m;
+    absl::flat_hash_map<uint64_t, std::pair<float, uint32_t>> nearest;
+    for (uint32_t i = 0; i < cloud.points.size(); ++i) {
+      const Eigen::Vector3f q = cloud.points[i] / s;
+      const Eigen::Vector3f cell = q.array().floor();
+      const float d = (q - cell - Eigen::Vector3f::Constant(0.5f)).squaredNorm();
+      const uint64_t key = packGridKey(cell.cast<int>());
+      const auto [it, inserted] = nearest.try_emplace(key, d, i);
+      if (!inserted && d < it->second.first) it->second = {d, i};
+    }
+    std::vector<uint32_t> uniform;
+    uniform.reserve(nearest.size());
+    for (const auto& [key, best] : nearest) uniform.push_back(best.second);
+    std::sort(uniform.begin(), uniform.end());
+    std::vector<uint32_t> merged;
+    std::set_union(result.begin(), result.end(), uniform.begin(), uniform.end(),
+                   std::back_inserter(merged));
+    if (counts) counts->uniform = merged.size() - result.size();
+    result = std::move(merged);
   }
   return result;
 }

@@ -20,6 +20,7 @@ PlaneFit fitPlane(const PointCloud& cloud, float distance_m, int iterations);
 
 struct KeypointCounts {
   size_t iss = 0, harris = 0, both = 0;
+  size_t uniform = 0;  // added by uniform_spacing_m (not already ISS or Harris3D)
 };
 // ISS (r_s, r_nm, r_b, k_min of table I) ∪ Harris3D (r_H, t_resp; then k_min neighbours within
 // r_H and surface variation λ0/(λ0+λ1+λ2) ≥ t_curv, which PCL's detector does not apply) as

@@ -1,5 +1,6 @@
 #include "core/model/object_model.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numeric>
 
@@ -110,6 +111,34 @@ TEST(BuildModel, ABoxGetsKeypointsAtItsCornersAndDescriptors) {
     ASSERT_NEAR(sum, 300.0f, 1.0f);
   }
   EXPECT_GT(model->timings.descriptors_ms, 0.0);
+}
+
+// uniform_spacing_m adds the point nearest each cube's centre to ISS ∪ Harris3D: on a box of
+// 0.4 × 0.3 × 0.2 m (0.52 m² of surface) with 5 cm cubes, one keypoint per occupied cube.
+TEST(DetectKeypoints, UniformSpacingAddsOnePointPerOccupiedCube) {
+  auto grid = sdfGrid(boxSdf({0, 0, 0}, {0.2f, 0.15f, 0.1f}), Eigen::Vector3f::Constant(-0.3f),
+                      Eigen::Vector3f::Constant(0.3f), kVoxel, 3 * kVoxel);
+  auto model = buildModel(std::move(grid.layer), grid.surface_voxels, defaults());
+  ASSERT_TRUE(model.ok()) << model.status();
+  KeypointParams params;
+  KeypointCounts plain_counts, uniform_counts;
+  const auto plain = detectKeypoints(model->cloud, params, &plain_counts);
+  params.uniform_spacing_m = 0.05f;
+  const auto uniform = detectKeypoints(model->cloud, params, &uniform_counts);
+  EXPECT_EQ(plain_counts.uniform, 0u);
+  EXPECT_EQ(uniform.size(), plain.size() + uniform_counts.uniform);
+  EXPECT_TRUE(std::includes(uniform.begin(), uniform.end(), plain.begin(), plain.end()));
+  EXPECT_TRUE(std::is_sorted(uniform.begin(), uniform.end()));
+  // Occupied 5 cm cubes of the box surface: between area / spacing² and twice that.
+  EXPECT_GE(uniform_counts.uniform + plain.size(), size_t(0.52 / 0.0025 * 0.8));
+  EXPECT_LE(uniform.size(), size_t(2 * 0.52 / 0.0025) + plain.size());
+  // Every cloud point lies within one cube diagonal of a keypoint.
+  for (const auto& p : model->cloud.points) {
+    float nearest = INFINITY;
+    for (uint32_t k : uniform) nearest = std::min(nearest, (model->cloud.points[k] - p).norm());
+    ASSERT_LT(nearest, 0.05f * std::sqrt(3.0f));
+  }
+  EXPECT_EQ(detectKeypoints(model->cloud, params), uniform);  // deterministic
 }
 
 TEST(BuildModel, IsDeterministic) {
