@@ -2,11 +2,28 @@
 
 #include "core/common/params_io.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 
 namespace objdb::cli {
+
+bool isDatasetDir(const std::filesystem::path& path) {
+  std::error_code ec;
+  return std::filesystem::exists(path / "poses.txt", ec) ||
+         std::filesystem::exists(path / "depth.txt", ec);
+}
+
+std::vector<std::filesystem::path> datasetSubfolders(const std::filesystem::path& root) {
+  std::vector<std::filesystem::path> folders;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(root, ec)) {
+    if (entry.is_directory() && isDatasetDir(entry.path())) folders.push_back(entry.path());
+  }
+  std::sort(folders.begin(), folders.end());
+  return folders;
+}
 
 bool parseInt(const char* text, long long lo, long long hi, long long* out) {
   char* end = nullptr;

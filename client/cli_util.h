@@ -2,12 +2,19 @@
 // ("objdb <command>: message"; usage errors exit 2, runtime errors exit 1).
 #pragma once
 
+#include <filesystem>
 #include <string>
+#include <vector>
 
 #include "core/common/params.h"
 #include "core/common/status.h"
 
 namespace objdb::cli {
+
+// A dataset folder (objdb or TUM layout): it holds poses.txt or depth.txt.
+bool isDatasetDir(const std::filesystem::path& path);
+// The dataset folders directly inside `root` (a folder of sessions), in name order.
+std::vector<std::filesystem::path> datasetSubfolders(const std::filesystem::path& root);
 
 // Parses a whole decimal integer within [lo, hi]; false on anything else.
 bool parseInt(const char* text, long long lo, long long hi, long long* out);

@@ -33,10 +33,6 @@ and in how many frames each object is visible (from instances/, objdb layout onl
 
 namespace fs = std::filesystem;
 
-bool isDatasetDir(const fs::path& p) {
-  return fs::exists(p / "poses.txt") || fs::exists(p / "depth.txt");
-}
-
 int describeDataset(const fs::path& path, bool visibility, int min_pixels_arg) {
   auto opened = io::openDataset(path);
   if (!opened.ok()) {
@@ -114,11 +110,7 @@ int describeDataset(const fs::path& path, bool visibility, int min_pixels_arg) {
 }
 
 int describeCollection(const fs::path& root, bool visibility, int min_pixels) {
-  std::vector<fs::path> sessions;
-  for (const auto& entry : fs::directory_iterator(root)) {
-    if (entry.is_directory() && isDatasetDir(entry.path())) sessions.push_back(entry.path());
-  }
-  std::sort(sessions.begin(), sessions.end());
+  const std::vector<fs::path> sessions = cli::datasetSubfolders(root);
   if (sessions.empty()) {
     std::fprintf(stderr,
                  "objdb info: %s is neither a dataset (no poses.txt or depth.txt) nor a folder "
@@ -193,7 +185,7 @@ int runInfoCommand(int argc, char** argv) {
     std::fprintf(stderr, "objdb info: %s is not a folder\n", path.c_str());
     return 1;
   }
-  if (isDatasetDir(path)) return describeDataset(path, visibility, min_pixels);
+  if (cli::isDatasetDir(path)) return describeDataset(path, visibility, min_pixels);
   return describeCollection(path, visibility, min_pixels);
 }
 

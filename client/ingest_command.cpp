@@ -40,17 +40,13 @@ constexpr const char* kCommand = "ingest";
 
 namespace fs = std::filesystem;
 
-bool isDatasetDir(const fs::path& p) {
-  return fs::exists(p / "poses.txt") || fs::exists(p / "depth.txt");
-}
-
 // The sessions named by the arguments: (name, folder), in order.
 StatusOr<std::vector<std::pair<std::string, fs::path>>> sessionsOf(
     const std::vector<std::string>& paths) {
   std::vector<std::pair<std::string, fs::path>> out;
   for (const auto& arg : paths) {
     const fs::path p = fs::path(arg).lexically_normal();
-    if (isDatasetDir(p)) {
+    if (cli::isDatasetDir(p)) {
       out.emplace_back(p.filename().string(), p);
       continue;
     }
@@ -58,15 +54,11 @@ StatusOr<std::vector<std::pair<std::string, fs::path>>> sessionsOf(
     if (!fs::is_directory(p, ec)) {
       return absl::NotFoundError(absl::StrFormat("%s is not a dataset folder", arg));
     }
-    std::vector<fs::path> children;
-    for (const auto& entry : fs::directory_iterator(p, ec)) {
-      if (entry.is_directory() && isDatasetDir(entry.path())) children.push_back(entry.path());
-    }
+    const std::vector<fs::path> children = cli::datasetSubfolders(p);
     if (children.empty()) {
       return absl::NotFoundError(absl::StrFormat(
           "%s holds no dataset (no poses.txt or depth.txt in it or its subfolders)", arg));
     }
-    std::sort(children.begin(), children.end());
     for (const auto& c : children) out.emplace_back(c.filename().string(), c);
   }
   return out;

@@ -10,14 +10,6 @@
 #include "core/common/logging.h"
 
 namespace objdb::storage {
-namespace {
-
-constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
-
-// Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
-Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
-  return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
-}
 
 // A model's columns, encoded outside the write lock.
 struct EncodedModel {
@@ -35,6 +27,15 @@ struct EncodedModel {
   };
   std::vector<Obs> observations;
 };
+
+namespace {
+
+constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
+
+// Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
+Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
+  return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
+}
 
 EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
   EncodedModel e;
@@ -320,8 +321,7 @@ StatusOr<int64_t> SqliteStore::addModel(model::ObjectModel model) {
     bindModel(&s, e);
     OBJDB_RETURN_IF_ERROR(s.run());
     const int64_t id = sqlite3_last_insert_rowid(writer_->get());
-    model.id = id;
-    OBJDB_RETURN_IF_ERROR(writeObservations(&model, true));
+    OBJDB_RETURN_IF_ERROR(writeObservations(id, e, /*replace=*/false));
     OBJDB_RETURN_IF_ERROR(txn.commit());
     return id;
   };
@@ -330,12 +330,13 @@ StatusOr<int64_t> SqliteStore::addModel(model::ObjectModel model) {
   return id;
 }
 
-// Observations of `model` (its rows are replaced). Runs inside the caller's transaction.
-Status SqliteStore::writeObservations(model::ObjectModel* model, bool insert) {
-  if (!insert) {
+// The observation rows of model `model_id` (replacing its earlier ones when `replace`). Runs
+// inside the caller's transaction.
+Status SqliteStore::writeObservations(int64_t model_id, const EncodedModel& model, bool replace) {
+  if (replace) {
     OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
                                               *writer_, "DELETE FROM observations WHERE model_id = ?"));
-    OBJDB_RETURN_IF_ERROR(del.bind(1, model->id).run());
+    OBJDB_RETURN_IF_ERROR(del.bind(1, model_id).run());
   }
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
@@ -344,12 +345,12 @@ Status SqliteStore::writeObservations(model::ObjectModel* model, bool insert) {
                          "raw_segment_id, T_world_object, T_object_segment) VALUES "
                          "(?, ?, ?, ?, (SELECT id FROM raw_segments WHERE session_id = ?3 AND "
                          "label = ?4), ?, ?)"));
-  for (size_t k = 0; k < model->observations.size(); ++k) {
-    const auto& o = model->observations[k];
+  for (size_t k = 0; k < model.observations.size(); ++k) {
+    const auto& o = model.observations[k];
     OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(o.session));
     OBJDB_RETURN_IF_ERROR(s.reset());
-    s.bind(1, model->id).bind(2, int64_t(k)).bind(3, sid).bind(4, int64_t(o.label));
-    s.bindBlob(5, encodeTransform(o.T_world_object)).bindBlob(6, encodeTransform(o.T_object_segment));
+    s.bind(1, model_id).bind(2, int64_t(k)).bind(3, sid).bind(4, o.label);
+    s.bindBlob(5, o.T_world_object).bindBlob(6, o.T_object_segment);
     OBJDB_RETURN_IF_ERROR(s.run());
   }
   return absl::OkStatus();
@@ -379,7 +380,7 @@ Status SqliteStore::replaceModel(model::ObjectModel model,
     if (sqlite3_changes(writer_->get()) == 0) {
       return absl::NotFoundError(absl::StrFormat("no object model %d to replace", model.id));
     }
-    OBJDB_RETURN_IF_ERROR(writeObservations(&model, false));
+    OBJDB_RETURN_IF_ERROR(writeObservations(model.id, e, /*replace=*/true));
     if (merge) {
       OBJDB_ASSIGN_OR_RETURN(
           Statement m,
@@ -623,31 +624,27 @@ Status SqliteStore::putScene(const std::string& session,
                                            kNow)));
     map.bind(1, sid).bind(2, double(scene->voxelSize())).bind(3, int64_t(scene->voxelsPerSide()));
     OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).run());
-    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
-                                              *writer_, "DELETE FROM scene_blocks WHERE session_id = ?"));
-    OBJDB_RETURN_IF_ERROR(del.bind(1, sid).run());
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement insert,
-        Statement::prepare(*writer_, "INSERT INTO scene_blocks(session_id, bx, by, bz, tsdf) "
-                                     "VALUES (?, ?, ?, ?, ?)"));
-    for (const auto& b : blocks) {
-      OBJDB_RETURN_IF_ERROR(insert.reset());
-      insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
-      OBJDB_RETURN_IF_ERROR(insert.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
-    }
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement del_labels,
-        Statement::prepare(*writer_, "DELETE FROM scene_label_blocks WHERE session_id = ?"));
-    OBJDB_RETURN_IF_ERROR(del_labels.bind(1, sid).run());
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement insert_labels,
-        Statement::prepare(*writer_, "INSERT INTO scene_label_blocks(session_id, bx, by, bz, "
-                                     "labels) VALUES (?, ?, ?, ?, ?)"));
-    for (const auto& b : label_blocks) {
-      OBJDB_RETURN_IF_ERROR(insert_labels.reset());
-      insert_labels.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
-      OBJDB_RETURN_IF_ERROR(insert_labels.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
-    }
+    // A block table's rows of this session replaced by `rows` (TSDF or label blocks).
+    auto replaceBlocks = [&](const char* table, const char* column,
+                             const std::vector<EncodedBlock>& rows) -> Status {
+      OBJDB_ASSIGN_OR_RETURN(
+          Statement del,
+          Statement::prepare(*writer_, absl::StrFormat("DELETE FROM %s WHERE session_id = ?", table)));
+      OBJDB_RETURN_IF_ERROR(del.bind(1, sid).run());
+      OBJDB_ASSIGN_OR_RETURN(
+          Statement insert,
+          Statement::prepare(*writer_, absl::StrFormat("INSERT INTO %s(session_id, bx, by, bz, %s) "
+                                                       "VALUES (?, ?, ?, ?, ?)",
+                                                       table, column)));
+      for (const auto& b : rows) {
+        OBJDB_RETURN_IF_ERROR(insert.reset());
+        insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
+        OBJDB_RETURN_IF_ERROR(insert.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
+      }
+      return absl::OkStatus();
+    };
+    OBJDB_RETURN_IF_ERROR(replaceBlocks("scene_blocks", "tsdf", blocks));
+    OBJDB_RETURN_IF_ERROR(replaceBlocks("scene_label_blocks", "labels", label_blocks));
     return txn.commit();
   };
   OBJDB_RETURN_IF_ERROR(annotate(body(), absl::StrFormat("storing the scene of session %s", session)));

@@ -73,6 +73,8 @@ struct StoreStats {
   std::vector<TableStats> tables;
 };
 
+struct EncodedModel;  // a model's columns as blobs (sqlite_store.cpp)
+
 class SqliteStore : public database::ModelStore {
  public:
   static StatusOr<std::unique_ptr<SqliteStore>> open(const std::string& path,
@@ -123,7 +125,7 @@ class SqliteStore : public database::ModelStore {
   StatusOr<ReaderLease> reader() const;
   Status requireWriter() const;
   StatusOr<int64_t> sessionIdForWrite(const std::string& name);
-  Status writeObservations(model::ObjectModel* model, bool insert);  // in the caller's txn
+  Status writeObservations(int64_t model_id, const EncodedModel& model, bool replace);
 
   std::string path_;
   SqliteStoreOptions options_;
