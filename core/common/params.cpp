@@ -85,6 +85,7 @@ Status KeypointParams::validate() const {
 }
 
 Status DescriptorParams::validate() const {
+  OBJDB_RETURN_IF_ERROR(inRange(surface_spacing_m, 0.0, 1.0, "descriptors.surface_spacing_m"));
   return positive(fpfh_radius_m, "descriptors.fpfh_radius_m");
 }
 

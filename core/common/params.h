@@ -87,6 +87,12 @@ struct KeypointParams {
 // §III-C.2 descriptors (table I).
 struct DescriptorParams {
   float fpfh_radius_m = 0.10f;  // r
+  // Ours: the histograms are built over the model cloud resampled to this spacing (keypoints
+  // stay where they are); 0 = over the model cloud itself. FPFH's cost grows with the square of
+  // the points within r. 2 cm (was 0) measured on the lounge: the same recall (39 of 82) and 0
+  // erroneous merges, database stage 17.9 s instead of 22.8 s, worst insert into 1,000 models
+  // 0.45 s instead of 0.86 s.
+  float surface_spacing_m = 0.02f;
   Status validate() const;
 };
 

@@ -67,6 +67,7 @@ void forEachField(KeypointParams& p, Fn&& fn) {
 template <typename Fn>
 void forEachField(DescriptorParams& p, Fn&& fn) {
   fn("fpfh_radius_m", p.fpfh_radius_m);
+  fn("surface_spacing_m", p.surface_spacing_m);
 }
 template <typename Fn>
 void forEachField(MatchingParams& p, Fn&& fn) {

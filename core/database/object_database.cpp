@@ -50,6 +50,7 @@ model::ModelBuildParams ObjectDatabase::buildParams() const {
   p.keypoints = params_.keypoints;
   p.descriptors = params_.descriptors;
   p.mesh_min_weight = params_.tsdf.mesh_min_weight;
+  p.threads = params_.database.threads;
   return p;
 }
 
@@ -247,8 +248,10 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   InsertReport report;
   const SegmentKey key{session, segment.label};
   if (const auto it = segment_model_.find(key); it != segment_model_.end()) {
+    const auto t = Clock::now();
     OBJDB_RETURN_IF_ERROR(removeContribution(key, it->second));
     report.replaced_earlier = true;
+    report.timings.replace_ms = msSince(t);
   }
   RawSegmentRecord record;
   record.key = key;
@@ -270,7 +273,10 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   std::vector<int64_t> candidates;
   std::vector<std::shared_ptr<const model::ObjectModel>> loaded;
   if (report.matchable) {
+    auto t = Clock::now();
     OBJDB_ASSIGN_OR_RETURN(std::vector<int64_t> ranked, candidatesFor(incoming));
+    report.timings.prefilter_ms = msSince(t);
+    t = Clock::now();
     candidates.reserve(ranked.size());
     for (int64_t id : ranked) {
       auto candidate = store_->model(id);
@@ -284,6 +290,7 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
       candidates.push_back(id);
       loaded.push_back(*std::move(candidate));
     }
+    report.timings.load_ms = msSince(t);
   }
   report.candidates = candidates.size();
   report.results.resize(candidates.size());
@@ -325,6 +332,7 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     report.timings.scene_verify_ms += t.scene_verify_ms;
   }
 
+  const auto t_store = Clock::now();
   // The accepted candidate with the lowest e_TSDF (ties: the older model).
   const CandidateResult* best = nullptr;
   for (const auto& r : report.results) {
@@ -367,6 +375,7 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
                  session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m,
                  merge.tsdf_overlap);
   }
+  report.timings.store_ms = msSince(t_store);
   report.timings.total_ms = msSince(start);
   return report;
 }

@@ -41,6 +41,10 @@ struct CandidateResult {
 struct InsertTimings {
   double cloud_ms = 0, keypoints_ms = 0, descriptors_ms = 0, match_register_ms = 0,
          model_verify_ms = 0, scene_verify_ms = 0, total_ms = 0;
+  // Not in table II: removing a re-extracted segment's earlier contribution, the prefilter (index
+  // upkeep and votes), loading the candidates, storing the result (a merged model's rebuild
+  // included).
+  double replace_ms = 0, prefilter_ms = 0, load_ms = 0, store_ms = 0;
 };
 
 struct InsertReport {

@@ -215,9 +215,10 @@ CoarseAlignment estimateCoarseAlignment(const std::vector<Eigen::Vector3f>& from
 
 Registration registerModels(const model::ObjectModel& source, const model::ObjectModel& target,
                             const DescriptorIndex& target_index, const MatchingParams& params) {
-  // PCL prints to stderr when ICP finds too few pairs; that outcome is reported in `reason`.
+  // PCL reports too few ICP pairs as an error on stderr; here that outcome is a rejection with
+  // its reason, so PCL's console stays quiet.
   static const bool quiet = [] {
-    pcl::console::setVerbosityLevel(pcl::console::L_ERROR);
+    pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
     return true;
   }();
   (void)quiet;

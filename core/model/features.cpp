@@ -7,7 +7,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "core/common/grid_key.h"
 
-#include <pcl/features/fpfh.h>
+#include <pcl/features/fpfh_omp.h>
 #include <pcl/keypoints/harris_3d.h>
 #include <pcl/keypoints/iss_3d.h>
 #include <pcl/point_cloud.h>
@@ -74,7 +74,8 @@ PlaneFit fitPlane(const PointCloud& cloud, float distance_m, int iterations) {
 }
 
 std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointParams& params,
-                                      KeypointCounts* counts) {
+                                      KeypointCounts* counts, int threads) {
+  threads = std::max(1, threads);
   std::vector<uint32_t> result;
   if (cloud.points.size() < 3 || cloud.normals.size() != cloud.points.size()) return result;
   const auto points = toPcl(cloud);
@@ -91,7 +92,7 @@ std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointPar
   iss.setBorderRadius(params.iss_border_radius_m);
   iss.setNormals(normals);
   iss.setMinNeighbors(params.iss_min_neighbors);
-  iss.setNumberOfThreads(1);
+  iss.setNumberOfThreads(threads);
   pcl::PointCloud<pcl::PointXYZ> iss_points;
   iss.compute(iss_points);
   std::vector<uint32_t> from_iss;
@@ -106,7 +107,7 @@ std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointPar
   harris.setThreshold(params.harris_response_threshold);
   harris.setNonMaxSupression(true);
   harris.setRefine(false);  // keypoints stay cloud points (indices)
-  harris.setNumberOfThreads(1);
+  harris.setNumberOfThreads(threads);
   pcl::PointCloud<pcl::PointXYZI> harris_points;
   harris.compute(harris_points);
   std::vector<uint32_t> from_harris;
@@ -156,17 +157,27 @@ std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointPar
 }
 
 std::vector<Fpfh> computeFpfh(const PointCloud& cloud, std::vector<uint32_t>* indices,
-                              const DescriptorParams& params) {
+                              const DescriptorParams& params, int threads) {
   std::vector<Fpfh> result;
   if (indices->empty() || cloud.normals.size() != cloud.points.size()) {
     indices->clear();
     return result;
   }
-  const auto points = toPcl(cloud);
-  const auto normals = toPclNormals(cloud);
   auto keypoints = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  for (uint32_t i : *indices) keypoints->push_back((*points)[i]);
-  pcl::FPFHEstimation<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fpfh;
+  for (uint32_t i : *indices) {
+    keypoints->push_back(pcl::PointXYZ(cloud.points[i].x(), cloud.points[i].y(), cloud.points[i].z()));
+  }
+  const PointCloud* surface = &cloud;
+  PointCloud resampled;
+  if (params.surface_spacing_m > 0.0f) {
+    resampled = resampleCloud(cloud, params.surface_spacing_m);
+    surface = &resampled;
+  }
+  const auto points = toPcl(*surface);
+  const auto normals = toPclNormals(*surface);
+  // The OpenMP variant is precompiled in libpcl_features; with one thread it equals the plain one.
+  pcl::FPFHEstimationOMP<pcl::PointXYZ, pcl::Normal, pcl::FPFHSignature33> fpfh(
+      static_cast<unsigned int>(std::max(1, threads)));
   fpfh.setSearchSurface(points);
   fpfh.setInputNormals(normals);
   fpfh.setInputCloud(keypoints);

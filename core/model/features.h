@@ -24,13 +24,15 @@ struct KeypointCounts {
 };
 // ISS (r_s, r_nm, r_b, k_min of table I) ∪ Harris3D (r_H, t_resp; then k_min neighbours within
 // r_H and surface variation λ0/(λ0+λ1+λ2) ≥ t_curv, which PCL's detector does not apply) as
-// indices into the cloud, ascending. The cloud needs normals.
+// indices into the cloud, ascending. The cloud needs normals. `threads` > 1 runs ISS and Harris3D
+// on that many OpenMP threads; the result does not depend on it.
 std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointParams& params,
-                                      KeypointCounts* counts = nullptr);
+                                      KeypointCounts* counts = nullptr, int threads = 1);
 
 // FPFH (radius r) at the given cloud points, over the whole cloud as search surface. Keypoints
-// whose descriptor is undefined (too few neighbours) are dropped from `indices`.
+// whose descriptor is undefined (too few neighbours) are dropped from `indices`. `threads` > 1
+// computes them on that many OpenMP threads (PCL's FPFHEstimationOMP); the same result.
 std::vector<Fpfh> computeFpfh(const PointCloud& cloud, std::vector<uint32_t>* indices,
-                              const DescriptorParams& params);
+                              const DescriptorParams& params, int threads = 1);
 
 }  // namespace objdb::model

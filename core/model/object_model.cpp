@@ -161,10 +161,10 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
   model.timings.planarity_ms = msSince(t);
   if (model.planar || model.cloud.points.size() < size_t(params.model.min_points)) return model;
   t = Clock::now();
-  model.keypoint_indices = detectKeypoints(model.cloud, params.keypoints);
+  model.keypoint_indices = detectKeypoints(model.cloud, params.keypoints, nullptr, params.threads);
   model.timings.keypoints_ms = msSince(t);
   t = Clock::now();
-  model.descriptors = computeFpfh(model.cloud, &model.keypoint_indices, params.descriptors);
+  model.descriptors = computeFpfh(model.cloud, &model.keypoint_indices, params.descriptors, params.threads);
   model.timings.descriptors_ms = msSince(t);
   return model;
 }

@@ -80,6 +80,7 @@ struct ModelBuildParams {
   KeypointParams keypoints;
   DescriptorParams descriptors;
   float mesh_min_weight = 3.0f;  // tsdf.mesh_min_weight
+  int threads = 1;               // database.threads: keypoints and descriptors on this many
 };
 
 // Builds a model from a segment's grid and the voxels carrying its label (same frame; the grid

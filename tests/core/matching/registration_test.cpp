@@ -30,7 +30,8 @@ Sdf asymmetricObject() {
 // A partial view of the object placed at T_frame_object: the surface voxels whose object-frame
 // x lies in [x_min, x_max] (a camera that saw one end of it).
 model::ObjectModel partialView(const Sdf& object, const Transform& T_frame_object, float x_min,
-                               float x_max) {
+                               float x_max,
+                               const model::ModelBuildParams& params = model::ModelBuildParams{}) {
   const Eigen::Isometry3f T = T_frame_object.cast<float>();
   auto grid = sdfGrid(objdb::testing::transformedSdf(object, T), Eigen::Vector3f::Constant(-0.5f),
                       Eigen::Vector3f::Constant(0.5f), kVoxel, 3 * kVoxel);
@@ -39,7 +40,7 @@ model::ObjectModel partialView(const Sdf& object, const Transform& T_frame_objec
     const float x = (T.inverse() * grid.layer.voxelCenter(v)).x();
     if (x >= x_min && x <= x_max) seen.push_back(v);
   }
-  return model::buildModel(std::move(grid.layer), seen, model::ModelBuildParams{}).value();
+  return model::buildModel(std::move(grid.layer), seen, params).value();
 }
 
 double angleDeg(const Eigen::Matrix3d& R) {
@@ -65,15 +66,15 @@ TEST(FpfhSimilarity, IsOneForIdenticalAndFallsWithDistance) {
   EXPECT_LT(fpfhSimilarity(a, c), s);  // disjoint histograms are the least similar
 }
 
-TEST(RegisterModels, TwoPartialViewsAtAKnownTransformRegisterWithin1cmAnd2Degrees) {
+void expectKnownTransformRecovered(const model::ModelBuildParams& params) {
   const Sdf object = asymmetricObject();
   // Target frame = object frame; the source saw the object moved by a known transform.
   const Transform T_source_object =
       Transform(Eigen::Translation3d(0.06, -0.04, 0.03)) *
       Transform(Eigen::AngleAxisd(0.5, Eigen::Vector3d(1, 2, 3).normalized()));
   // The target saw x ≤ 0.1, the source x ≥ −0.1: 20 cm in common, ball and block included.
-  const model::ObjectModel target = partialView(object, Transform::Identity(), -0.3f, 0.1f);
-  const model::ObjectModel source = partialView(object, T_source_object, -0.1f, 0.3f);
+  const model::ObjectModel target = partialView(object, Transform::Identity(), -0.3f, 0.1f, params);
+  const model::ObjectModel source = partialView(object, T_source_object, -0.1f, 0.3f, params);
   ASSERT_TRUE(target.matchable(ModelParams{}));
   ASSERT_TRUE(source.matchable(ModelParams{}));
   const DescriptorIndex index(target.descriptors);
@@ -87,6 +88,25 @@ TEST(RegisterModels, TwoPartialViewsAtAKnownTransformRegisterWithin1cmAnd2Degree
   EXPECT_LT(angleDeg(error.rotation()), 2.0);
   EXPECT_LT(r.icp_rmse, 0.005);
   EXPECT_GE(r.inliers, 6u);
+}
+
+TEST(RegisterModels, TwoPartialViewsAtAKnownTransformRegisterWithin1cmAnd2Degrees) {
+  expectKnownTransformRecovered(model::ModelBuildParams{});
+}
+
+// FPFH histograms over the whole 1 cm cloud (descriptors.surface_spacing_m 0; the default builds
+// them over the cloud resampled to 2 cm).
+TEST(RegisterModels, DescriptorsOverTheFullCloudRecoverTheKnownTransformToo) {
+  model::ModelBuildParams params;
+  params.descriptors.surface_spacing_m = 0.0f;
+  expectKnownTransformRecovered(params);
+}
+
+// The recall profile (bench/configs/recall.json): uniform keypoints every 5 cm as well.
+TEST(RegisterModels, TheRecallProfileRecoversTheKnownTransformToo) {
+  model::ModelBuildParams params;
+  params.keypoints.uniform_spacing_m = 0.05f;
+  expectKnownTransformRecovered(params);
 }
 
 TEST(RegisterModels, UnrelatedShapesFindNoConsistentSet) {

@@ -141,6 +141,28 @@ TEST(DetectKeypoints, UniformSpacingAddsOnePointPerOccupiedCube) {
   EXPECT_EQ(detectKeypoints(model->cloud, params), uniform);  // deterministic
 }
 
+// descriptors.surface_spacing_m builds the histograms over a resampled cloud: one descriptor per
+// keypoint still, each a valid FPFH (three sub-histograms of 100). That they still match across
+// views is checked in tests/core/matching/registration_test.cpp.
+TEST(ComputeFpfh, OverAResampledSurfaceKeepsEveryKeypoint) {
+  auto grid = sdfGrid(boxSdf({0, 0, 0}, {0.2f, 0.15f, 0.1f}), Eigen::Vector3f::Constant(-0.3f),
+                      Eigen::Vector3f::Constant(0.3f), kVoxel, 3 * kVoxel);
+  auto model = buildModel(std::move(grid.layer), grid.surface_voxels, defaults());
+  ASSERT_TRUE(model.ok()) << model.status();
+  std::vector<uint32_t> full_keys = model->keypoint_indices, coarse_keys = model->keypoint_indices;
+  DescriptorParams params;
+  params.surface_spacing_m = 0.0f;  // the model cloud itself
+  const auto full = computeFpfh(model->cloud, &full_keys, params);
+  params.surface_spacing_m = 0.02f;
+  const auto coarse = computeFpfh(model->cloud, &coarse_keys, params, 2);
+  ASSERT_EQ(coarse_keys, model->keypoint_indices);
+  ASSERT_EQ(coarse.size(), full.size());
+  for (const Fpfh& d : coarse) {
+    ASSERT_NEAR(std::accumulate(d.begin(), d.end(), 0.0f), 300.0f, 1.0f);
+  }
+  EXPECT_NE(coarse, full);  // the option does something
+}
+
 TEST(BuildModel, IsDeterministic) {
   auto make = [] {
     auto grid = sdfGrid(unionSdf({boxSdf({0, 0, 0}, {0.15f, 0.1f, 0.1f}),
@@ -153,6 +175,25 @@ TEST(BuildModel, IsDeterministic) {
   EXPECT_EQ(a.keypoint_indices, b.keypoint_indices);
   EXPECT_EQ(a.descriptors, b.descriptors);
   EXPECT_EQ(a.cloud.points, b.cloud.points);
+}
+
+// Keypoints and descriptors on several threads (OpenMP inside ISS, Harris3D and FPFH) equal the
+// single-threaded ones, bit for bit, uniform keypoints included.
+TEST(BuildModel, ThreadsDoNotChangeTheResult) {
+  auto make = [](int threads) {
+    auto grid = sdfGrid(unionSdf({boxSdf({0, 0, 0}, {0.15f, 0.1f, 0.1f}),
+                                  sphereSdf({0.15f, 0.1f, 0.1f}, 0.08f)}),
+                        Eigen::Vector3f::Constant(-0.3f), Eigen::Vector3f::Constant(0.35f), kVoxel,
+                        3 * kVoxel);
+    ModelBuildParams params = defaults();
+    params.keypoints.uniform_spacing_m = 0.05f;
+    params.threads = threads;
+    return buildModel(std::move(grid.layer), grid.surface_voxels, params).value();
+  };
+  const ObjectModel one = make(1), three = make(3);
+  ASSERT_GT(one.keypoint_indices.size(), 10u);
+  EXPECT_EQ(one.keypoint_indices, three.keypoint_indices);
+  EXPECT_EQ(one.descriptors, three.descriptors);
 }
 
 TEST(BuildModel, BadInputIsAClearError) {
