@@ -134,6 +134,10 @@ int main(int argc, char** argv) {
   database::InsertTimings sum;
   size_t raw_segments = 0, mergeable = 0, planar = 0, skipped = 0;
   std::map<std::string, size_t> stages;  // candidate outcomes: stage where each stopped
+  std::map<std::string, size_t> stages_same;  // the same, for candidates holding the segment's kind
+  // After an accepted registration, the model-to-model numbers: candidates of the incoming
+  // segment's kind, and of other kinds (where recall is lost, and how close the wrong ones get).
+  std::vector<double> etsdf_same, etsdf_other, overlap_same, overlap_other;
   double match_ms = 0, ransac_ms = 0, icp_ms = 0;
   // Prefilter recall: stored models holding a segment of the incoming segment's kind, and how
   // many of them the prefilter kept.
@@ -257,7 +261,15 @@ int main(int argc, char** argv) {
         ransac_ms += c.registration.ransac_ms;
         icp_ms += c.registration.icp_ms;
         // The stage, and for rejections the first word of the reason (which threshold).
-        ++stages[c.accepted ? "accepted" : c.stage + ":" + c.reason.substr(0, c.reason.find(' '))];
+        const std::string outcome =
+            c.accepted ? "accepted" : c.stage + ":" + c.reason.substr(0, c.reason.find(' '));
+        ++stages[outcome];
+        const bool same = relevant.count(c.model_id) > 0;
+        if (same) ++stages_same[outcome];
+        if (c.registration.accepted && !relevant.empty()) {
+          (same ? etsdf_same : etsdf_other).push_back(c.model_verdict.agreement.rmse);
+          (same ? overlap_same : overlap_other).push_back(double(c.model_verdict.agreement.overlap));
+        }
       }
       planar += report->planar ? 1 : 0;
       mergeable += report->matchable ? 1 : 0;
@@ -341,6 +353,19 @@ int main(int argc, char** argv) {
   std::printf("\ncandidates evaluated: %zu (%.1f per mergeable insert); outcome:", evaluated,
               mergeable ? double(evaluated) / double(mergeable) : 0.0);
   for (const auto& [stage, n] : stages) std::printf(" %s %zu", stage.c_str(), n);
+  std::printf("\n  of them holding the segment's kind:");
+  for (const auto& [stage, n] : stages_same) std::printf(" %s %zu", stage.c_str(), n);
+  auto quantiles = [](std::vector<double> v, double scale) {
+    if (v.empty()) return std::string("none");
+    std::sort(v.begin(), v.end());
+    auto at = [&](double q) { return scale * v[size_t(q * double(v.size() - 1))]; };
+    return absl::StrFormat("%zu, min %.1f, p10 %.1f, median %.1f, p90 %.1f", v.size(), at(0.0),
+                           at(0.1), at(0.5), at(0.9));
+  };
+  std::printf("\n  registered, e_TSDF mm: same kind %s; other kinds %s",
+              quantiles(etsdf_same, 1000.0).c_str(), quantiles(etsdf_other, 1000.0).c_str());
+  std::printf("\n  registered, o_TSDF voxels: same kind %s; other kinds %s",
+              quantiles(overlap_same, 1.0).c_str(), quantiles(overlap_other, 1.0).c_str());
   std::printf("\nprefilter recall: %.0f %% of the stored models of the same kind kept as "
               "candidates (%zu of %zu); %zu of %zu inserts kept at least one\n",
               relevant_models ? 100.0 * relevant_kept / relevant_models : 0.0, relevant_kept,

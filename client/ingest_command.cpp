@@ -13,8 +13,10 @@
 #include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/frame_loop.h"
+#include "core/common/params_io.h"
 #include "core/database/object_database.h"
 #include "core/io/dataset.h"
+#include "storage/model_settings.h"
 #include "storage/sqlite_store.h"
 
 namespace objdb {
@@ -127,6 +129,9 @@ int runIngestCommand(int argc, char** argv) {
       }
     }
   }
+  if (Status same = storage::checkModelSettings(*known, params); !same.ok()) {
+    return cli::reportError(kCommand, same);
+  }
   auto db = database::ObjectDatabase::create(params, store->get());
   if (!db.ok()) return cli::reportError(kCommand, db.status());
 
@@ -147,7 +152,7 @@ int runIngestCommand(int argc, char** argv) {
                                           {"cx", ds.intrinsics().cx},
                                           {"cy", ds.intrinsics().cy}}
                                .dump();
-    info.params_json = config.empty() ? "{}" : ("config file " + config);
+    info.params_json = paramsToJson(params);  // effective parameters (checkModelSettings)
     if (auto begun = (*store)->beginSession(info); !begun.ok()) {
       return cli::reportError(kCommand, begun.status());
     }

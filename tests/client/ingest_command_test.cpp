@@ -2,6 +2,7 @@
 // the second session merge into the first session's models; a session already stored is refused.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <string>
 
@@ -57,6 +58,28 @@ TEST(IngestCommand, TwoSessionsOfTheSameSceneMergeTheirObjects) {
   r = runProcess({kObjdb, "ingest", "--db", db.string(), (sessions / "monday").string()});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.err.find("session monday is already in"), std::string::npos) << r.err;
+
+  // Sessions record their effective parameters; a session that would describe its models
+  // differently is refused before any work, naming the setting.
+  {
+    auto reopened = storage::SqliteStore::open(db.string()).value();
+    const auto recorded = reopened->sessions().value();
+    ASSERT_FALSE(recorded.empty());
+    EXPECT_NE(recorded[0].params_json.find("\"surface_spacing_m\""), std::string::npos)
+        << recorded[0].params_json;
+  }
+  fs::copy(sessions / "monday", dir / "wednesday", fs::copy_options::recursive);
+  const fs::path config = dir / "full-cloud.json";
+  std::FILE* f = std::fopen(config.string().c_str(), "w");
+  ASSERT_NE(f, nullptr);
+  std::fputs(R"({"descriptors": {"surface_spacing_m": 0}})", f);
+  std::fclose(f);
+  r = runProcess({kObjdb, "ingest", "--db", db.string(), "--config", config.string(),
+                  (dir / "wednesday").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("descriptors.surface_spacing_m"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("session tuesday"), std::string::npos) << r.err;
+  EXPECT_EQ(storage::SqliteStore::open(db.string()).value()->sessions().value().size(), 2u);
 }
 
 TEST(IngestCommand, BadArgumentsAreClearErrors) {
