@@ -8,6 +8,7 @@ namespace objdb::segmentation {
 
 void QualityCounts::add(const QualityCounts& o) {
   weighted_iou += o.weighted_iou;
+  weighted_union_iou += o.weighted_union_iou;
   object_pixels += o.object_pixels;
   objects += o.objects;
   segments += o.segments;
@@ -31,8 +32,10 @@ QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage
     ++segment_size[l];
     if (g != 0) ++overlap[{l, g}];
   }
-  // Per segment: instances inside it.
+  // Per segment: instances inside it. Per instance: the union of its majority segments
+  // (pixels of the union, of them on the instance).
   std::unordered_map<int32_t, std::vector<std::pair<uint16_t, size_t>>> per_segment;
+  std::unordered_map<uint16_t, std::pair<size_t, size_t>> majority_union;
   for (const auto& [key, n] : overlap) per_segment[key.first].push_back({key.second, n});
   for (const auto& [label, size] : segment_size) {
     ++q.segments;
@@ -49,6 +52,10 @@ QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage
       }
     }
     if (above >= 2) ++q.under_segmented;
+    if (2 * majority_n > size) {  // mostly inside `majority`
+      majority_union[majority].first += size;
+      majority_union[majority].second += majority_n;
+    }
     if (!options.structure_ids.count(majority) && instance_size[majority] >= size_t(options.min_object_pixels)) {
       ++q.object_segments;
     }
@@ -65,7 +72,11 @@ QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage
     ++q.objects;
     q.object_pixels += double(size);
     q.weighted_iou += double(size) * best_iou[g];
-    if (scores) (*scores)[g] = ObjectScore{best_iou[g], size};
+    const auto& [union_size, union_on] = majority_union[g];
+    const double union_iou =
+        union_size ? double(union_on) / double(union_size + size - union_on) : 0.0;
+    q.weighted_union_iou += double(size) * union_iou;
+    if (scores) (*scores)[g] = ObjectScore{best_iou[g], union_iou, size};
   }
   return q;
 }

@@ -1,6 +1,8 @@
 // Segmentation quality against ground-truth instance masks (issue 3 targets): coverage (IoU of
 // each object's best segment, weighted by object size), under-segmentation (segments spanning
-// two or more instances) and over-segmentation (segments per object).
+// two or more instances) and over-segmentation (segments per object). Also, for composite objects
+// that a geometric segmenter cuts into parts on purpose (a chair's seat, back and legs): union
+// coverage, the IoU of the union of the segments lying mostly inside each object.
 #pragma once
 
 #include <cstdint>
@@ -15,6 +17,7 @@ namespace objdb::segmentation {
 struct QualityCounts {
   // Sums over frames; ratios are computed by the accessors.
   double weighted_iou = 0.0;       // Σ pixels(object) · best IoU(object)
+  double weighted_union_iou = 0.0; // Σ pixels(object) · IoU(object, its majority segments)
   double object_pixels = 0.0;      // Σ pixels(object)
   size_t objects = 0;              // object observations (object × frame)
   size_t segments = 0;
@@ -22,6 +25,9 @@ struct QualityCounts {
   size_t object_segments = 0;      // segments whose majority instance is an object
 
   double coverage() const { return object_pixels > 0 ? weighted_iou / object_pixels : 0.0; }
+  double unionCoverage() const {
+    return object_pixels > 0 ? weighted_union_iou / object_pixels : 0.0;
+  }
   double underSegmentationRate() const {
     return segments ? double(under_segmented) / double(segments) : 0.0;
   }
@@ -39,6 +45,7 @@ struct QualityOptions {
 // (optional) receives each scored object's best IoU and pixel count.
 struct ObjectScore {
   double best_iou = 0.0;
+  double union_iou = 0.0;  // the union of the segments whose majority is this object
   size_t pixels = 0;
 };
 QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage& instances,

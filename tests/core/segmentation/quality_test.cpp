@@ -43,9 +43,40 @@ TEST(EvaluateSegmentation, HandMadeTwoInstanceExampleHasKnownNumbers) {
   //           instance 2 ↔ segment 2 = 50 / (60 + 50 − 50) = 5/6.
   EXPECT_NEAR(q.weighted_iou, 50 * 0.8 + 50 * 5.0 / 6.0, 1e-9);
   EXPECT_NEAR(q.coverage(), (0.8 + 5.0 / 6.0) / 2.0, 1e-9);
+  // Majority segments: segment 1 of instance 1, segment 2 of instance 2 (50 of 60): the unions
+  // are the best segments here.
+  EXPECT_NEAR(q.unionCoverage(), q.coverage(), 1e-9);
   // Segments 1 and 2 have an object majority (instances 1 and 2); segment 3 has none.
   EXPECT_EQ(q.object_segments, 2u);
   EXPECT_DOUBLE_EQ(q.segmentsPerObject(), 1.0);
+}
+
+// An object cut into parts: on a 10 × 10 image, instance 1 = columns 0–5 (60 px), cut into three
+// segments of two columns each; instance 2 = columns 6–9 (40 px), one segment.
+TEST(EvaluateSegmentation, UnionCoverageJoinsTheSegmentsMostlyInsideAnObject) {
+  LabelImage labels{10, 10, 0};
+  InstanceImage instances{10, 10, 0};
+  for (int v = 0; v < 10; ++v) {
+    for (int u = 0; u < 10; ++u) {
+      instances.at(u, v) = u < 6 ? 1 : 2;
+      labels.at(u, v) = u < 6 ? 1 + u / 2 : 4;  // segments 1–3 on instance 1, 4 on instance 2
+    }
+  }
+  // Segment 3 also takes column 6 of rows 0–4: 25 px, 20 on instance 1 (majority) and 5 on 2.
+  for (int v = 0; v < 5; ++v) labels.at(6, v) = 3;
+  QualityOptions options;
+  options.min_object_pixels = 1;
+  std::map<uint16_t, ObjectScore> scores;
+  const QualityCounts q = evaluateSegmentation(labels, instances, options, &scores);
+  // Instance 1: best single segment IoU = 20 / (20 + 60 − 20) = 1/3 (segments 1 and 2);
+  // union of segments 1–3 = 65 px, 60 on instance 1: IoU = 60 / (65 + 60 − 60) = 12/13.
+  EXPECT_NEAR(scores[1].best_iou, 1.0 / 3.0, 1e-9);
+  EXPECT_NEAR(scores[1].union_iou, 12.0 / 13.0, 1e-9);
+  // Instance 2 (40 px): segment 4 = 35 px all on it: IoU 35 / 40 both ways.
+  EXPECT_NEAR(scores[2].best_iou, 35.0 / 40.0, 1e-9);
+  EXPECT_NEAR(scores[2].union_iou, 35.0 / 40.0, 1e-9);
+  EXPECT_NEAR(q.unionCoverage(), (60 * 12.0 / 13.0 + 40 * 35.0 / 40.0) / 100.0, 1e-9);
+  EXPECT_GT(q.unionCoverage(), q.coverage());
 }
 
 TEST(EvaluateSegmentation, StructureIsScoredForUnderSegmentationOnly) {
