@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "bench/chair_model.h"
 #include "core/common/logging.h"
 #include "core/matching/registration.h"
 #include "core/model/features.h"
@@ -29,58 +30,9 @@ double secondsSince(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
-float boxSdf(const Eigen::Vector3f& p, const Eigen::Vector3f& centre, const Eigen::Vector3f& half) {
-  const Eigen::Vector3f q = (p - centre).cwiseAbs() - half;
-  return q.cwiseMax(0.0f).norm() + std::min(q.maxCoeff(), 0.0f);
-}
-
-// A chair of the given size: seat, back and four legs (metres).
-float chairSdf(const Eigen::Vector3f& p, float width, float depth, float seat_height,
-               float back_height) {
-  const float leg = 0.02f;
-  float d = boxSdf(p, {0, 0, seat_height}, {width / 2, depth / 2, 0.02f});
-  d = std::min(d, boxSdf(p, {0, depth / 2 - 0.015f, seat_height + back_height / 2},
-                         {width / 2, 0.015f, back_height / 2}));
-  for (const float sx : {-1.0f, 1.0f}) {
-    for (const float sy : {-1.0f, 1.0f}) {
-      d = std::min(d, boxSdf(p, {sx * (width / 2 - leg), sy * (depth / 2 - leg), seat_height / 2},
-                             {leg, leg, seat_height / 2}));
-    }
-  }
-  return d;
-}
-
-// The model the database would build from a chair segment.
+// The model the database would build from a chair segment, with 500 described keypoints.
 model::ObjectModel chairModel(int variant) {
-  const float voxel = 0.01f, trunc = 0.03f;
-  const float width = 0.44f + 0.02f * float(variant), depth = 0.42f + 0.015f * float(variant);
-  const float seat = 0.45f, back = 0.40f + 0.02f * float(variant);
-  tsdf::TsdfLayer grid = tsdf::TsdfLayer::create(voxel, 8).value();
-  std::vector<tsdf::VoxelIndex> voxels;
-  const Eigen::Vector3i lo = (Eigen::Vector3f(-width / 2 - 0.05f, -depth / 2 - 0.05f, -0.05f) / voxel)
-                                 .array().floor().cast<int>();
-  const Eigen::Vector3i hi = (Eigen::Vector3f(width / 2 + 0.05f, depth / 2 + 0.05f, seat + back + 0.05f) / voxel)
-                                 .array().ceil().cast<int>();
-  for (int x = lo.x(); x <= hi.x(); ++x) {
-    for (int y = lo.y(); y <= hi.y(); ++y) {
-      for (int z = lo.z(); z <= hi.z(); ++z) {
-        const tsdf::VoxelIndex v(x, y, z);
-        const Eigen::Vector3f c = grid.voxelCenter(v);
-        const float d = chairSdf(c, width, depth, seat, back);
-        if (std::abs(d) > trunc) continue;
-        tsdf::TsdfBlock& block = grid.allocateBlock(grid.blockOfVoxel(v));
-        tsdf::TsdfVoxel& out = block.voxel(grid.linearInBlock(v));
-        out.distance = d;
-        // Weights as a sensor leaves them: higher where seen more often, varying smoothly.
-        out.weight = 5.0f + 20.0f * (0.5f + 0.5f * std::sin(c.x() * 13.0f + c.z() * 7.0f));
-        out.color = {uint8_t(120 + x % 8), uint8_t(80 + y % 8), uint8_t(60 + z % 8)};
-        if (std::abs(d) < voxel) voxels.push_back(v);
-      }
-    }
-  }
-  model::ModelBuildParams params;
-  params.mesh_min_weight = 1.0f;
-  auto built = model::buildModel(std::move(grid), voxels, params);
+  auto built = bench::chairModel(variant);
   if (!built.ok()) {
     std::fprintf(stderr, "storage_bench: %s\n", std::string(built.status().message()).c_str());
     std::exit(1);
@@ -90,7 +42,7 @@ model::ObjectModel chairModel(int variant) {
   std::vector<uint32_t> keypoints;
   const size_t n = built->cloud.points.size();
   for (size_t k = 0; k < 500 && k < n; ++k) keypoints.push_back(uint32_t(k * n / 500));
-  built->descriptors = model::computeFpfh(built->cloud, &keypoints, params.descriptors);
+  built->descriptors = model::computeFpfh(built->cloud, &keypoints, DescriptorParams{});
   built->keypoint_indices = std::move(keypoints);
   return std::move(*built);
 }
