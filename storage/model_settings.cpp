@@ -19,9 +19,11 @@ nlohmann::json describingSettings(const nlohmann::json& params) {
       out[std::string(section) + "." + key] = value;
     }
   }
-  if (params.contains("tsdf") && params["tsdf"].is_object() &&
-      params["tsdf"].contains("voxel_size_m")) {
-    out["tsdf.voxel_size_m"] = params["tsdf"]["voxel_size_m"];
+  // The voxel size and the weight a surface needs to be meshed shape the model's cloud too.
+  if (params.contains("tsdf") && params["tsdf"].is_object()) {
+    for (const char* key : {"voxel_size_m", "mesh_min_weight"}) {
+      if (params["tsdf"].contains(key)) out[std::string("tsdf.") + key] = params["tsdf"][key];
+    }
   }
   return out;
 }

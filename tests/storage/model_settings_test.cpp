@@ -58,6 +58,13 @@ TEST(CheckModelSettings, ADifferentDescriptionIsRefusedNamingTheKeyAndSession) {
   params.tsdf.voxel_size_m = 0.01f;
   EXPECT_THAT(std::string(checkModelSettings(stored, params).message()),
               HasSubstr("tsdf.voxel_size_m"));
+  params = Params{};
+  params.tsdf.mesh_min_weight = 5.0f;
+  EXPECT_THAT(std::string(checkModelSettings(stored, params).message()),
+              HasSubstr("tsdf.mesh_min_weight"));
+  params = Params{};
+  params.tsdf.max_weight = 50.0f;  // fusion, not description
+  EXPECT_TRUE(checkModelSettings(stored, params).ok());
 }
 
 TEST(CheckModelSettings, TheNewestRecordedSessionDecides) {
