@@ -80,7 +80,10 @@ struct KeypointParams {
   int iss_min_neighbors = 5;             // k_NN^min (ISS)
   // Ours, not in table I: also one keypoint per cube of this side (the cloud point nearest the
   // cube's centre), so that small or smooth segments get enough correspondences; 0 = off.
-  float uniform_spacing_m = 0.0f;
+  // 5 cm (was 0) with matching.ransac_inlier_distance_m 4 cm, measured on the lounge with the
+  // paper's thresholds: 59 % of repeated objects' segments with their kind (was 49 %), 0
+  // erroneous merges, database stage 24.2 s (was 11.3 s).
+  float uniform_spacing_m = 0.05f;
   Status validate() const;
 };
 
@@ -102,7 +105,7 @@ struct MatchingParams {
   int k_nn = 5;                       // k_NN best descriptor matches per keypoint
   float icp_max_rmse_m = 0.02f;       // e*_ICP
   // Ours (not in table I): RANSAC over the descriptor matches, then point-to-plane ICP.
-  float ransac_inlier_distance_m = 0.03f;  // a match agrees with a transform within this
+  float ransac_inlier_distance_m = 0.04f;  // a match agrees with a transform within this
   int ransac_iterations = 10000;
   int ransac_min_inliers = 4;              // fewer: no consistent set, candidate rejected
   // The coarse transform must not be contradicted by the target's TSDF: (agreeing − disagreeing)

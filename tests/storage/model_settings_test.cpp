@@ -51,7 +51,7 @@ TEST(CheckModelSettings, ADifferentDescriptionIsRefusedNamingTheKeyAndSession) {
   EXPECT_THAT(std::string(s.message()), HasSubstr("session monday"));
   EXPECT_THAT(std::string(s.message()), HasSubstr("= 0.02 (session monday), these parameters say 0;"));
   params = Params{};
-  params.keypoints.uniform_spacing_m = 0.05f;
+  params.keypoints.uniform_spacing_m = 0.0f;
   EXPECT_THAT(std::string(checkModelSettings(stored, params).message()),
               HasSubstr("keypoints.uniform_spacing_m"));
   params = Params{};

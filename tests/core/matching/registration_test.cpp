@@ -66,7 +66,8 @@ TEST(FpfhSimilarity, IsOneForIdenticalAndFallsWithDistance) {
   EXPECT_LT(fpfhSimilarity(a, c), s);  // disjoint histograms are the least similar
 }
 
-void expectKnownTransformRecovered(const model::ModelBuildParams& params) {
+void expectKnownTransformRecovered(const model::ModelBuildParams& params,
+                                   const MatchingParams& matching = MatchingParams{}) {
   const Sdf object = asymmetricObject();
   // Target frame = object frame; the source saw the object moved by a known transform.
   const Transform T_source_object =
@@ -78,7 +79,7 @@ void expectKnownTransformRecovered(const model::ModelBuildParams& params) {
   ASSERT_TRUE(target.matchable(ModelParams{}));
   ASSERT_TRUE(source.matchable(ModelParams{}));
   const DescriptorIndex index(target.descriptors);
-  const Registration r = registerModels(source, target, index, MatchingParams{});
+  const Registration r = registerModels(source, target, index, matching);
   ASSERT_TRUE(r.accepted) << r.reason << " (matches " << r.matches << ", inliers " << r.inliers
                           << ", e_ICP " << r.icp_rmse << ")";
   // T_target_source should be T_object_source = T_source_object⁻¹.
@@ -102,11 +103,14 @@ TEST(RegisterModels, DescriptorsOverTheFullCloudRecoverTheKnownTransformToo) {
   expectKnownTransformRecovered(params);
 }
 
-// The recall profile (bench/configs/recall.json): uniform keypoints every 5 cm as well.
-TEST(RegisterModels, TheRecallProfileRecoversTheKnownTransformToo) {
+// ISS ∪ Harris3D keypoints alone (keypoints.uniform_spacing_m 0; the default adds one per 5 cm
+// cube) and the paper-era RANSAC inlier distance of 3 cm.
+TEST(RegisterModels, WithoutUniformKeypointsTheKnownTransformIsRecoveredToo) {
   model::ModelBuildParams params;
-  params.keypoints.uniform_spacing_m = 0.05f;
-  expectKnownTransformRecovered(params);
+  params.keypoints.uniform_spacing_m = 0.0f;
+  MatchingParams matching;
+  matching.ransac_inlier_distance_m = 0.03f;
+  expectKnownTransformRecovered(params, matching);
 }
 
 TEST(RegisterModels, UnrelatedShapesFindNoConsistentSet) {

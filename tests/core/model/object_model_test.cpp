@@ -121,6 +121,7 @@ TEST(DetectKeypoints, UniformSpacingAddsOnePointPerOccupiedCube) {
   auto model = buildModel(std::move(grid.layer), grid.surface_voxels, defaults());
   ASSERT_TRUE(model.ok()) << model.status();
   KeypointParams params;
+  params.uniform_spacing_m = 0.0f;  // ISS ∪ Harris3D alone
   KeypointCounts plain_counts, uniform_counts;
   const auto plain = detectKeypoints(model->cloud, params, &plain_counts);
   params.uniform_spacing_m = 0.05f;
