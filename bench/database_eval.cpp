@@ -404,7 +404,7 @@ int main(int argc, char** argv) {
       std::printf("\n%-10s %4s %-18s %8s %8s %8s %7s %7s\n", "session", "id", "kind", "before",
                   "after", "ceiling", "placed", "filled");
     }
-    size_t placements = 0, verified = 0;
+    size_t placements = 0, verified = 0, added_vertices = 0, added_on_truth = 0;
     for (int si = 0; si < sessions; ++si) {
       const std::string& name = scenes[size_t(si)].name;
       const auto scene = store.scene(name).value();
@@ -427,8 +427,23 @@ int main(int argc, char** argv) {
         mesher.update(&copy, true);
         return mesher.mesh();
       };
-      before_of.emplace(name, MeshDistance::create(meshOf(*scene), 0.02f).value());
-      after_of.emplace(name, MeshDistance::create(meshOf(*completed), 0.02f).value());
+      const TriangleMesh before_mesh = meshOf(*scene), after_mesh = meshOf(*completed);
+      before_of.emplace(name, MeshDistance::create(before_mesh, 0.02f).value());
+      after_of.emplace(name, MeshDistance::create(after_mesh, 0.02f).value());
+      // What completion added (surface farther than 2 cm from the measured reconstruction), and
+      // how much of it lies on a true surface of the scene (objects, floor and walls).
+      TriangleMesh truth_mesh;
+      for (const auto& instance : built_scenes[size_t(si)].instances) {
+        TriangleMesh m = *instance.mesh;
+        m.transform(instance.T_world_object);
+        truth_mesh.append(m);
+      }
+      const auto truth_index = MeshDistance::create(truth_mesh, 0.02f).value();
+      for (const auto& v : after_mesh.vertices) {
+        if (before_of.at(name).distance(v) <= 0.02f) continue;
+        ++added_vertices;
+        added_on_truth += truth_index.distance(v) <= 0.02f ? 1 : 0;
+      }
     }
     double before_sum = 0, after_sum = 0, ceiling_sum = 0;
     int n = 0;
@@ -477,6 +492,11 @@ int main(int argc, char** argv) {
                 n ? 100.0 * after_sum / n : 0.0, n ? 100.0 * (after_sum - before_sum) / n : 0.0, n,
                 n ? 100.0 * ceiling_sum / n : 0.0,
                 n ? 100.0 * (ceiling_sum - before_sum) / n : 0.0);
+    std::printf("completion added %zu mesh vertices (farther than 2 cm from the measured "
+                "surface); %.1f %% of them lie within 2 cm of a true surface of the scene "
+                "(precision)\n",
+                added_vertices,
+                added_vertices ? 100.0 * double(added_on_truth) / double(added_vertices) : 0.0);
   }
 
   if (scale > 0) {

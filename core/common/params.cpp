@@ -58,6 +58,7 @@ Status GsmParams::validate() const {
   OBJDB_RETURN_IF_ERROR(
       inRange(association_overlap_ratio, 0.0, 1.0, "gsm.association_overlap_ratio"));
   OBJDB_RETURN_IF_ERROR(inRange(merge_min_frames, 1, 1 << 20, "gsm.merge_min_frames"));
+  OBJDB_RETURN_IF_ERROR(inRange(merge_min_joint_share, 0.0, 1.0, "gsm.merge_min_joint_share"));
   return inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames");
 }
 
@@ -114,6 +115,8 @@ Status MergingParams::validate() const {
   OBJDB_RETURN_IF_ERROR(positive(tsdf_max_rmse_m, "merging.tsdf_max_rmse_m"));
   OBJDB_RETURN_IF_ERROR(
       inRange(tsdf_min_overlap_voxels, 0.0, 1e9, "merging.tsdf_min_overlap_voxels"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(completion_margin_voxels, 0, 16, "merging.completion_margin_voxels"));
   return positive(reference_voxel_size_m, "merging.reference_voxel_size_m");
 }
 

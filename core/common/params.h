@@ -47,6 +47,13 @@ struct GsmParams {
   bool label_history = true;             // false: one label + confidence per voxel (ablation)
   float merge_overlap_ratio = 0.1f;      // pairwise label overlap that counts as evidence
   int merge_min_frames = 2;              // frames of evidence before two labels merge
+  // Ours: besides merge_min_frames, the frames in which one segment covered both labels must be
+  // at least this share of the frames that saw them touching (in the others each was claimed by
+  // a segment of its own). 0 = the paper's rule. 0.5 measured on the lounge: a helmet and a
+  // container standing on the round table no longer merge into its label after two noisy frames
+  // (that segment was 57 % table, now 90 %); GSM label quality unchanged (gsm_eval), database
+  // recall 55 of 92 (was 53 of 90), 0 erroneous merges, completion precision 28 % → 38 %.
+  float merge_min_joint_share = 0.5f;
   int extraction_age_frames = 10;        // a label untouched this long is extracted
   Status validate() const;
 };
@@ -130,6 +137,12 @@ struct MergingParams {
   // (reference / actual voxel size)² (see minOverlapVoxels).
   float tsdf_min_overlap_voxels = 1e4f;
   float reference_voxel_size_m = 0.01f;
+  // Ours (scene completion): a placed model fills only the scene voxels within this many voxels
+  // of the model's own surface voxels. Beyond them a model grid holds the truncation band of
+  // whatever surrounded each observation (floor, walls, neighbours), which is not the object.
+  // 1 measured on the lounge: 28 % of the added surface on a true surface (27 % unrestricted),
+  // completion gain +1.3 points (+1.4).
+  int completion_margin_voxels = 1;
   double minOverlapVoxels(double voxel_size_m) const;
   Status validate() const;
 };

@@ -42,6 +42,7 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("label_history", p.label_history);
   fn("merge_overlap_ratio", p.merge_overlap_ratio);
   fn("merge_min_frames", p.merge_min_frames);
+  fn("merge_min_joint_share", p.merge_min_joint_share);
   fn("extraction_age_frames", p.extraction_age_frames);
 }
 template <typename Fn>
@@ -87,6 +88,7 @@ void forEachField(MergingParams& p, Fn&& fn) {
   fn("tsdf_max_rmse_m", p.tsdf_max_rmse_m);
   fn("tsdf_min_overlap_voxels", p.tsdf_min_overlap_voxels);
   fn("reference_voxel_size_m", p.reference_voxel_size_m);
+  fn("completion_margin_voxels", p.completion_margin_voxels);
 }
 template <typename Fn>
 void forEachField(DatabaseParams& p, Fn&& fn) {

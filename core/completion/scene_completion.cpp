@@ -1,8 +1,31 @@
 #include "core/completion/scene_completion.h"
 
+#include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
 
 namespace objdb::completion {
+namespace {
+
+// The model's surface voxels and every voxel within `margin` of them (a cube neighbourhood),
+// in a deterministic order.
+std::vector<tsdf::VoxelIndex> objectRegion(const model::ObjectModel& model, int margin) {
+  std::vector<tsdf::VoxelIndex> region;
+  absl::flat_hash_set<uint64_t> seen;
+  for (const tsdf::VoxelIndex& v : model.surface_voxels) {
+    for (int z = -margin; z <= margin; ++z) {
+      for (int y = -margin; y <= margin; ++y) {
+        for (int x = -margin; x <= margin; ++x) {
+          const tsdf::VoxelIndex n = v + tsdf::VoxelIndex(x, y, z);
+          if (seen.insert(packGridKey(n)).second) region.push_back(n);
+        }
+      }
+    }
+  }
+  return region;
+}
+
+}  // namespace
 
 StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
                                         const std::string& session, const MergingParams& merging,
@@ -22,6 +45,7 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
   for (int64_t id : ids) {
     OBJDB_ASSIGN_OR_RETURN(auto model, store.model(id));
     if (model->observations.size() < 2) continue;
+    std::vector<tsdf::VoxelIndex> region;  // built on the first verified placement
     for (const auto& o : model->observations) {
       if (o.session != session) continue;
       Placement p;
@@ -34,9 +58,10 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
           model->grid.voxelSize());
       p.verified = p.verdict.accepted;
       if (p.verified) {
-        p.filled_voxels =
-            matching::mergeGrids(&completed, model->grid, o.T_world_object, max_weight,
-                                 matching::MergeMode::kFillUnobserved, &p.filled_surface_voxels);
+        if (region.empty()) region = objectRegion(*model, merging.completion_margin_voxels);
+        p.filled_voxels = matching::mergeGrids(&completed, model->grid, o.T_world_object,
+                                               max_weight, matching::MergeMode::kFillUnobserved,
+                                               &p.filled_surface_voxels, &region);
       }
       out.filled_voxels += p.filled_voxels;
       out.placements.push_back(p);

@@ -260,13 +260,23 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   absl::flat_hash_set<uint64_t> seen_this_frame;
   for (const auto& [n, s, g] : pairs) {
     const Label assigned = result.segment_labels[size_t(s - 1)];
-    if (assigned == 0 || assigned == g || taken.count(g)) continue;
-    if (double(n) < params_.merge_overlap_ratio * double(segment_size[size_t(s)])) continue;
+    if (assigned == 0 || assigned == g) continue;
     const uint64_t key = packPair(resolve(assigned), resolve(g));
+    if (taken.count(g)) {
+      // Touching, and each claimed by its own segment: evidence that they are two objects.
+      if (params_.merge_min_joint_share > 0.0f && seen_this_frame.insert(key).second) {
+        ++pair_evidence_[key].separate;
+      }
+      continue;
+    }
+    if (double(n) < params_.merge_overlap_ratio * double(segment_size[size_t(s)])) continue;
     if (!seen_this_frame.insert(key).second) continue;
-    if (++merge_evidence_[key] >= params_.merge_min_frames) {
+    PairEvidence& e = pair_evidence_[key];
+    ++e.joint;
+    if (e.joint >= params_.merge_min_frames &&
+        double(e.joint) >= double(params_.merge_min_joint_share) * double(e.joint + e.separate)) {
       merge(assigned, g);
-      merge_evidence_.erase(key);
+      pair_evidence_.erase(key);
       ++result.merges;
     }
   }

@@ -104,7 +104,12 @@ class Gsm {
   absl::flat_hash_map<tsdf::BlockIndex, std::vector<LabelVoxel>, tsdf::BlockIndexHash> label_blocks_;
   absl::flat_hash_map<Label, LabelInfo> info_;          // roots only
   std::vector<Label> parent_ = {0};  // union–find over all labels ever made (index = label)
-  absl::flat_hash_map<uint64_t, int> merge_evidence_;   // (a, b) packed → frames seen together
+  // Per touching label pair (a, b packed): frames in which one segment covered both (merge
+  // evidence) and frames in which each was claimed by a segment of its own.
+  struct PairEvidence {
+    int joint = 0, separate = 0;
+  };
+  absl::flat_hash_map<uint64_t, PairEvidence> pair_evidence_;
   Label next_label_ = 1;
   int64_t frame_ = 0;
   std::unique_ptr<FrameScratch> scratch_;

@@ -64,7 +64,8 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 
 size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
                   const Transform& T_target_source, float max_weight, MergeMode mode,
-                  size_t* written_near_surface) {
+                  size_t* written_near_surface,
+                  const std::vector<tsdf::VoxelIndex>* source_region) {
   const Eigen::Isometry3f T_source_target = T_target_source.inverse().cast<float>();
   const Eigen::Isometry3f T_ts = T_target_source.cast<float>();
   // Target voxels to write: the observed ones, and those around every observed source voxel.
@@ -76,7 +77,7 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
     });
   }
   const float inv = 1.0f / target->voxelSize();
-  forEachObserved(source, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) {
+  auto around = [&](const tsdf::VoxelIndex& v) {
     const Eigen::Vector3f p = T_ts * source.voxelCenter(v);
     const Eigen::Vector3i lower =
         (p * inv - Eigen::Vector3f::Constant(0.5f)).array().floor().cast<int>();
@@ -84,7 +85,15 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
       const tsdf::VoxelIndex t = lower + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1);
       if (seen.insert(packGridKey(t)).second) candidates.push_back(t);
     }
-  });
+  };
+  if (source_region != nullptr) {
+    for (const tsdf::VoxelIndex& v : *source_region) {
+      const tsdf::TsdfVoxel* voxel = source.voxel(v);
+      if (voxel != nullptr && voxel->weight > 0.0f) around(v);
+    }
+  } else {
+    forEachObserved(source, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel&) { around(v); });
+  }
   // Resample first, write after: the writes must not feed later interpolations of the target.
   struct Write {
     tsdf::VoxelIndex index;

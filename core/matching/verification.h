@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <string>
+#include <vector>
 
 #include "core/common/params.h"
 #include "core/common/transform.h"
@@ -39,13 +40,16 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 // max_weight). Voxels only the source observed are added. Grids must share the voxel size.
 // kFillUnobserved (scene completion) leaves every observed target voxel as it is. Returns the
 // number of target voxels written; `written_near_surface` gets those within one voxel of the
-// surface (|distance| ≤ voxel size).
+// surface (|distance| ≤ voxel size). With `source_region`, only the target voxels around those
+// source voxels are written (and, for kFuse, the target's observed ones); interpolation still
+// reads the whole source.
 enum class MergeMode {
   kFuse,            // weighted average where both observed, source values where only it did
   kFillUnobserved,  // only voxels the target never observed get the source's values
 };
 size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
                   const Transform& T_target_source, float max_weight,
-                  MergeMode mode = MergeMode::kFuse, size_t* written_near_surface = nullptr);
+                  MergeMode mode = MergeMode::kFuse, size_t* written_near_surface = nullptr,
+                  const std::vector<tsdf::VoxelIndex>* source_region = nullptr);
 
 }  // namespace objdb::matching

@@ -76,6 +76,53 @@ TEST(CompleteScene, FillsTheSideOfAnObjectThatOnlyAnotherSessionSaw) {
   EXPECT_EQ(before, after);
 }
 
+// A segment's grid also holds the band of whatever stood near the object (here a plate beside it
+// on Tuesday, not in the segment's label voxels). Completion pastes the object, not its
+// neighbourhood: Monday gets the back face but no plate.
+TEST(CompleteScene, FillsTheObjectButNotWhatStoodNearItInAnotherSession) {
+  Fixture f;
+  ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
+  gsm::RawSegment tuesday = rawSegment(1, kTuesday, kBack);
+  // A vertical plate at object-frame y = 0.3 (the box is 0.2 wide), x and z in [0, 0.12]: its
+  // band of ±3 voxels, written into the segment's grid (segment frame = world frame here).
+  const float voxel = tuesday.grid.voxelSize();
+  const Eigen::Isometry3f T_object_world = kTuesday.T_world_object.inverse().cast<float>();
+  auto plate_distance = [](const Eigen::Vector3f& p) { return p.y() - 0.3f; };
+  for (float x = 0.0f; x <= 0.12f; x += voxel / 2) {
+    for (float z = 0.0f; z <= 0.12f; z += voxel / 2) {
+      for (float y = 0.3f - 3 * voxel; y <= 0.3f + 3 * voxel; y += voxel / 2) {
+        const Eigen::Vector3f world = kTuesday.T_world_object.cast<float>() * Eigen::Vector3f(x, y, z);
+        const tsdf::VoxelIndex v = tuesday.grid.voxelIndexOf(world);
+        tuesday.grid.allocateBlock(tuesday.grid.blockOfVoxel(v));
+        tsdf::TsdfVoxel* voxel_ptr = tuesday.grid.voxel(v);
+        voxel_ptr->distance = plate_distance(T_object_world * tuesday.grid.voxelCenter(v));
+        voxel_ptr->weight = 5.0f;
+      }
+    }
+  }
+  auto merged = f.db->insertSegment("tuesday", tuesday);
+  ASSERT_TRUE(merged.ok()) << merged.status();
+  ASSERT_TRUE(merged->merged) << (merged->results.empty() ? "no candidate"
+                                                          : merged->results[0].reason);
+  const Eigen::Vector3f plate_world =
+      kMonday.T_world_object.cast<float>() * Eigen::Vector3f(0.06f, 0.3f, 0.06f);
+  const Eigen::Vector3f back_world =
+      kMonday.T_world_object.cast<float>() * Eigen::Vector3f(0.2f, 0.0f, 0.1f);
+  float d = 0.0f;
+  ASSERT_FALSE(f.store.scene("monday").value()->interpolateDistance(plate_world, &d));
+
+  Params p = params();
+  auto completed = completeScene(f.store, "monday", p.merging, 1000.0f, nullptr);
+  ASSERT_TRUE(completed.ok()) << completed.status();
+  EXPECT_TRUE(completed->interpolateDistance(back_world, &d));
+  EXPECT_FALSE(completed->interpolateDistance(plate_world, &d)) << "the plate was pasted: " << d;
+  // Without the margin rule (a margin wider than the plate's distance) the plate comes along.
+  p.merging.completion_margin_voxels = 16;
+  auto unrestricted = completeScene(f.store, "monday", p.merging, 1000.0f, nullptr);
+  ASSERT_TRUE(unrestricted.ok());
+  EXPECT_TRUE(unrestricted->interpolateDistance(plate_world, &d));
+}
+
 TEST(CompleteScene, SingleSegmentModelsAddNothingAndAMissingSceneIsAnError) {
   Fixture f;
   ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());

@@ -1,6 +1,8 @@
 #include "core/gsm/gsm.h"
 
+#include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -146,6 +148,47 @@ TEST(Gsm, TwoSegmentsOfOneObjectGetMergedAfterAFewFrames) {
     }
   }
   EXPECT_GT(labelled, box_voxels);  // box and floor
+}
+
+// Two labels seen apart in most frames (each claimed by its own segment) are not merged by a
+// couple of frames in which one segment covered both, unless merge_min_joint_share is 0 (the
+// paper's rule); they merge once the joint frames reach that share of all frames seeing both.
+TEST(Gsm, LabelsSeenApartNeedJointFramesInProportionToMerge) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  for (const float share : {0.0f, 0.5f}) {
+    GsmParams params;
+    params.merge_min_joint_share = share;
+    Gsm gsm = makeGsm(k, params);
+    int f = 0;
+    auto frame = [&](bool split) {
+      const Transform T = world.camera(0.03 * f++);
+      renderer.render(world.instances(), T, &out);
+      auto r = gsm.integrate(out.depth, labelsFrom(out.instances, split), T);
+      EXPECT_TRUE(r.ok()) << r.status();
+      return r.ok() ? r->merges : size_t(0);
+    };
+    // Apart: the box as two segments, two labels that touch (the first frame creates them, the
+    // next five are evidence that they are two objects).
+    for (int i = 0; i < 6; ++i) EXPECT_EQ(frame(true), 0u);
+    // The two halves are the labels other than the floor's (the largest).
+    std::vector<std::pair<int64_t, Label>> by_size;
+    for (const auto& [label, info] : gsm.labels()) by_size.emplace_back(info.voxels, label);
+    ASSERT_EQ(by_size.size(), 3u);
+    std::sort(by_size.rbegin(), by_size.rend());
+    const Label left = by_size[1].second, right = by_size[2].second;
+    frame(false);
+    frame(false);  // two joint frames: the paper's evidence
+    if (share == 0.0f) {
+      EXPECT_EQ(gsm.resolve(left), gsm.resolve(right)) << "the paper's rule merges after 2";
+      continue;
+    }
+    EXPECT_NE(gsm.resolve(left), gsm.resolve(right)) << "5 frames apart outweigh 2 together";
+    for (int i = 0; i < 8; ++i) frame(false);
+    EXPECT_EQ(gsm.resolve(left), gsm.resolve(right)) << "10 frames together outweigh 5 apart";
+  }
 }
 
 TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {

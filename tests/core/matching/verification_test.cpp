@@ -1,6 +1,7 @@
 #include "core/matching/verification.h"
 
 #include <cmath>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -136,6 +137,34 @@ TEST(MergeGrids, FillUnobservedLeavesObservedVoxelsAlone) {
   const tsdf::VoxelIndex only = target.voxelIndexOf(Eigen::Vector3f(0.2f, 0.0f, 0.013f));
   ASSERT_NE(target.voxel(only), nullptr);
   EXPECT_NEAR(target.voxel(only)->distance, target.voxelCenter(only).z() - 0.01f, 1e-6f);
+}
+
+TEST(MergeGrids, ASourceRegionLimitsTheFillToItsNeighbourhood) {
+  tsdf::TsdfLayer target = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  const tsdf::TsdfLayer source = linearField(0.01f, 1.0f, -0.1f, 0.3f);
+  // The region: the source's voxels with 0.15 ≤ x ≤ 0.2 (a slab across the plane).
+  std::vector<tsdf::VoxelIndex> region;
+  for (float x = 0.15f; x <= 0.2f + 1e-4f; x += kVoxel) {
+    for (float y = -0.05f; y <= 0.05f + 1e-4f; y += kVoxel) {
+      for (float z = -0.03f; z <= 0.03f + 1e-4f; z += kVoxel) {
+        region.push_back(source.voxelIndexOf(Eigen::Vector3f(x, y, z)));
+      }
+    }
+  }
+  region.push_back(tsdf::VoxelIndex(1000, 1000, 1000));  // unobserved: ignored
+  const size_t written = mergeGrids(&target, source, Transform::Identity(), 100.0f,
+                                    MergeMode::kFillUnobserved, nullptr, &region);
+  EXPECT_GT(written, 0u);
+  EXPECT_LE(written, region.size() * 8);
+  // Inside the region: filled with the source's values.
+  const tsdf::VoxelIndex inside = target.voxelIndexOf(Eigen::Vector3f(0.175f, 0.0f, 0.013f));
+  ASSERT_NE(target.voxel(inside), nullptr);
+  EXPECT_GT(target.voxel(inside)->weight, 0.0f);
+  EXPECT_NEAR(target.voxel(inside)->distance, target.voxelCenter(inside).z() - 0.01f, 1e-6f);
+  // Observed by the source, but far from the region: left unobserved.
+  const tsdf::VoxelIndex outside = target.voxelIndexOf(Eigen::Vector3f(0.27f, 0.0f, 0.013f));
+  const tsdf::TsdfVoxel* v = target.voxel(outside);
+  EXPECT_TRUE(v == nullptr || !(v->weight > 0.0f));
 }
 
 TEST(MergeGrids, ATransformedSourceLandsWhereTheTransformSays) {
