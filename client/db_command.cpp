@@ -1,12 +1,18 @@
 // `objdb db`: administration of a database file, offline and read-only — integrity check
-// (SQLite's and every blob's checksum), counts and sizes, the model list, and export of a model's
-// surface cloud or mesh to PLY. Never writes to the database.
+// (SQLite's and every blob's checksum), counts and sizes, the model list, export of a model's
+// surface cloud or mesh to PLY, and a session's scene completed by the merged models (paper
+// §III-C, scene completion) as a PLY mesh. Never writes to the database.
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
+#include <sstream>
 #include <string>
 
+#include "absl/strings/str_format.h"
 #include "client/cli_util.h"
 #include "client/commands.h"
+#include "core/common/params_io.h"
+#include "core/completion/scene_completion.h"
 #include "core/io/mesh_io.h"
 #include "core/tsdf/mesh_extraction.h"
 #include "storage/sqlite_store.h"
@@ -18,6 +24,7 @@ constexpr const char* kUsage = R"(usage: objdb db check  --db FILE
        objdb db stats  --db FILE
        objdb db models --db FILE
        objdb db export --db FILE --model ID --out FILE.ply [--what cloud|mesh] [--min-weight W]
+       objdb db complete --db FILE --session NAME --out FILE.ply [--config FILE] [--min-weight W]
 
 Administration of an objdb database file (opened read-only; nothing is written).
 
@@ -28,6 +35,13 @@ Administration of an objdb database file (opened read-only; nothing is written).
   export   a model's surface cloud with normals (--what cloud, the default) or the mesh of its
            TSDF grid (--what mesh; voxels lighter than --min-weight, default 3, are not meshed),
            in the model's own frame, as binary PLY
+  complete the session's scene map completed by the merged models: every model built from two or
+           more segments is placed where the session saw it and, where it verifies against the
+           scene (e*_TSDF, o*_TSDF), fills what the session never observed. Writes the completed
+           mesh (session's world frame, binary PLY) and prints each placement: model, GSM label,
+           segments, verdict, filled voxels. Parameters: the session's stored ones, then
+           --config on top (merging.* thresholds, tsdf.max_weight, tsdf.mesh_min_weight unless
+           --min-weight is given)
 )";
 
 constexpr const char* kCommand = "db";
@@ -117,6 +131,85 @@ int exportModel(const storage::SqliteStore& store, long long id, const std::stri
   return 0;
 }
 
+// The parameters a session was processed with (the defaults where the stored text is not a
+// parameter object, as in files written before sessions recorded them), then `config` on top.
+StatusOr<Params> sessionParams(const storage::SqliteStore& store, const std::string& session,
+                               const std::string& config, std::string* origin) {
+  OBJDB_ASSIGN_OR_RETURN(const auto sessions, store.sessions());
+  Params params;
+  *origin = "defaults";
+  bool known = false;
+  for (const auto& s : sessions) {
+    if (s.name != session) continue;
+    known = true;
+    Params stored;
+    if (applyParamsJson(s.params_json, &stored).ok()) {
+      params = stored;
+      *origin = "the session's stored parameters";
+    }
+  }
+  if (!known) {
+    return absl::NotFoundError(absl::StrFormat("no session %s in %s", session, store.path()));
+  }
+  if (!config.empty()) {
+    std::ifstream in(config, std::ios::binary);
+    if (!in.is_open()) {
+      return absl::NotFoundError(absl::StrFormat("cannot open config file %s", config));
+    }
+    std::stringstream text;
+    text << in.rdbuf();
+    if (Status applied = applyParamsJson(text.str(), &params); !applied.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("config file %s: %s", config, applied.message()));
+    }
+    *origin += " with " + config + " on top";
+  }
+  return params;
+}
+
+int complete(const storage::SqliteStore& store, const std::string& session, const std::string& out,
+             const std::string& config, double min_weight) {
+  std::string origin;
+  auto params = sessionParams(store, session, config, &origin);
+  if (!params.ok()) return cli::reportError(kCommand, params.status());
+  if (min_weight >= 0.0) params->tsdf.mesh_min_weight = float(min_weight);
+  completion::CompletionReport report;
+  auto completed = completion::completeScene(store, session, params->merging,
+                                             params->tsdf.max_weight, &report);
+  if (!completed.ok()) return cli::reportError(kCommand, completed.status());
+  const auto scene = store.scene(session);
+  if (!scene.ok()) return cli::reportError(kCommand, scene.status());
+  auto meshOf = [&](const tsdf::TsdfLayer& layer) {
+    tsdf::TsdfLayer copy = layer.clone();
+    tsdf::MeshLayer mesher(params->tsdf.mesh_min_weight);
+    mesher.update(&copy, true);
+    return mesher.mesh();
+  };
+  const TriangleMesh before = meshOf(**scene), after = meshOf(*completed);
+  if (Status written = io::writePlyMesh(out, after); !written.ok()) {
+    return cli::reportError(kCommand, written);
+  }
+  std::printf("session %s (%s): %zu placements of models built from >= 2 segments\n",
+              session.c_str(), origin.c_str(), report.placements.size());
+  std::printf("%8s %8s %9s  %-50s %8s %14s\n", "model", "label", "segments", "verdict",
+              "filled", "near surface");
+  size_t verified = 0;
+  for (const auto& p : report.placements) {
+    verified += p.verified ? 1 : 0;
+    const std::string verdict =
+        p.verified ? absl::StrFormat("verified (e_TSDF %.4f m, o_TSDF %d)",
+                                     p.verdict.agreement.rmse, p.verdict.agreement.overlap)
+                   : "rejected: " + p.verdict.reason;
+    std::printf("%8lld %8u %9zu  %-50s %8zu %14zu\n", (long long)p.model_id, p.label,
+                p.model_segments, verdict.c_str(), p.filled_voxels, p.filled_surface_voxels);
+  }
+  std::printf("%zu of %zu placements verified, %zu voxels filled; mesh %.2f m² measured, %.2f m² "
+              "completed (%zu vertices) written to %s\n",
+              verified, report.placements.size(), report.filled_voxels, before.surfaceArea(),
+              after.surfaceArea(), after.vertices.size(), out.c_str());
+  return 0;
+}
+
 }  // namespace
 
 int runDbCommand(int argc, char** argv) {
@@ -126,12 +219,13 @@ int runDbCommand(int argc, char** argv) {
     std::fputs(kUsage, stdout);
     return 0;
   }
-  if (action != "check" && action != "stats" && action != "models" && action != "export") {
+  if (action != "check" && action != "stats" && action != "models" && action != "export" &&
+      action != "complete") {
     return cli::usageError(kCommand, "unknown action \"" + action + "\"", kUsage);
   }
-  std::string db, out, what = "cloud";
+  std::string db, out, what = "cloud", session, config;
   long long model_id = -1;
-  double min_weight = 3.0;
+  double min_weight = -1.0;  // not given: 3 for export, the session's mesh weight for complete
   for (int i = 2; i < argc; ++i) {
     const std::string name = argv[i];
     if (name == "--help" || name == "-h") {
@@ -144,6 +238,10 @@ int runDbCommand(int argc, char** argv) {
       db = value;
     } else if (name == "--out") {
       out = value;
+    } else if (name == "--session") {
+      session = value;
+    } else if (name == "--config") {
+      config = value;
     } else if (name == "--what") {
       what = value;
       if (what != "cloud" && what != "mesh") {
@@ -169,6 +267,9 @@ int runDbCommand(int argc, char** argv) {
   if (action == "export" && (model_id < 0 || out.empty())) {
     return cli::usageError(kCommand, "export needs --model ID and --out FILE.ply", kUsage);
   }
+  if (action == "complete" && (session.empty() || out.empty())) {
+    return cli::usageError(kCommand, "complete needs --session NAME and --out FILE.ply", kUsage);
+  }
   storage::SqliteStoreOptions options;
   options.read_only = true;
   options.create_if_missing = false;
@@ -179,7 +280,8 @@ int runDbCommand(int argc, char** argv) {
   if (action == "check") return check(**store);
   if (action == "stats") return stats(**store);
   if (action == "models") return models(**store);
-  return exportModel(**store, model_id, out, what, float(min_weight));
+  if (action == "complete") return complete(**store, session, out, config, min_weight);
+  return exportModel(**store, model_id, out, what, min_weight < 0.0 ? 3.0f : float(min_weight));
 }
 
 }  // namespace objdb

@@ -5,10 +5,15 @@
 
 #include <filesystem>
 #include <string>
+#include <tuple>
 
+#include "core/common/params_io.h"
+#include "core/database/object_database.h"
 #include "core/io/mesh_io.h"
+#include "core/tsdf/mesh_extraction.h"
 #include "storage/sqlite_store.h"
 #include "tests/storage/store_fixtures.h"
+#include "tests/support/object_scenes.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"
 
@@ -87,6 +92,71 @@ TEST(DbCommand, CheckListsDamagedRowsAndExitsOne) {
   r = runProcess({kObjdb, "db", "models", "--db", db.string()});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_NE(r.out.find("3 unreadable"), std::string::npos) << r.out;
+}
+
+// The object seen from its front on Monday and from its back on Tuesday, merged by the database
+// into one model (core/completion's test scene), in a SQLite file.
+void writeTwoSessions(const fs::path& path) {
+  using namespace objdb::testing;
+  const PlacedShape monday{boxWithBall(), poseXyYaw(0.3, -0.2, 0.3)};
+  const PlacedShape tuesday{boxWithBall(), poseXyYaw(-0.5, 0.4, 2.0)};
+  const View front{-1.0f, 0.12f}, back{-0.12f, 1.0f};
+  Params params;
+  params.tsdf.voxel_size_m = kSceneVoxel;
+  auto store = storage::SqliteStore::open(path.string()).value();
+  for (const auto& [name, shape, view] :
+       {std::tuple{"monday", monday, front}, std::tuple{"tuesday", tuesday, back}}) {
+    storage::SessionInfo info;
+    info.name = name;
+    info.params_json = paramsToJson(params);
+    ASSERT_TRUE(store->beginSession(info).ok());
+    ASSERT_TRUE(store->putScene(name, std::make_shared<const tsdf::TsdfLayer>(
+                                          sceneGrid({shape}, {view}))).ok());
+  }
+  auto db = database::ObjectDatabase::create(params, store.get()).value();
+  ASSERT_TRUE(db->insertSegment("monday", rawSegment(1, monday, front)).ok());
+  auto merged = db->insertSegment("tuesday", rawSegment(1, tuesday, back));
+  ASSERT_TRUE(merged.ok() && merged->merged);
+}
+
+TEST(DbCommand, CompletesASessionsSceneWithTheMergedModels) {
+  testing::TempDir dir;
+  const fs::path db = dir / "objects.sqlite";
+  writeTwoSessions(db);
+  const fs::path out = dir / "monday.ply";
+  ProcessResult r = runProcess(
+      {kObjdb, "db", "complete", "--db", db.string(), "--session", "monday", "--out", out.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("the session's stored parameters"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("1 of 1 placements verified"), std::string::npos) << r.out;
+  const auto completed = io::readMesh(out);
+  ASSERT_TRUE(completed.ok()) << completed.status();
+  // Monday's own map, meshed the same way: the completed mesh has more surface (the back).
+  auto scene = storage::SqliteStore::open(db.string()).value()->scene("monday").value()->clone();
+  tsdf::MeshLayer mesher(3.0f);
+  mesher.update(&scene, true);
+  EXPECT_GT(completed->surfaceArea(), 1.2 * mesher.mesh().surfaceArea());
+
+  // Thresholds from --config on top: an overlap no placement reaches rejects it, nothing is filled.
+  ASSERT_TRUE(testing::writeTextFile(dir / "strict.json",
+                                     R"({"merging": {"tsdf_min_overlap_voxels": 1e9}})"));
+  r = runProcess({kObjdb, "db", "complete", "--db", db.string(), "--session", "monday", "--out",
+                  out.string(), "--config", (dir / "strict.json").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("rejected: overlap"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 of 1 placements verified, 0 voxels filled"), std::string::npos) << r.out;
+
+  r = runProcess({kObjdb, "db", "complete", "--db", db.string(), "--session", "friday", "--out",
+                  out.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("no session friday"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "db", "complete", "--db", db.string(), "--out", out.string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("complete needs --session NAME"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "db", "complete", "--db", db.string(), "--session", "monday", "--out",
+                  out.string(), "--config", (dir / "missing.json").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("cannot open config file"), std::string::npos) << r.err;
 }
 
 TEST(DbCommand, BadArgumentsAndWrongFilesAreClearErrors) {
