@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # README command (a): installs what is missing, builds, generates the synthetic three-session
 # lounge (paper §IV) into data/lounge, prints what it contains, runs the three sessions through
-# segmentation, GSM and the object database into data/objects.sqlite and describes the result.
+# segmentation, GSM and the object database into data/objects.sqlite, describes the result and
+# writes session 1's scene completed by the merged models (data/session_1_completed.ply).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -17,3 +18,6 @@ echo
 "$BUILD_DIR/bin/objdb" ingest --db "$DB" "$OUT"
 echo
 "$BUILD_DIR/bin/objdb" db stats --db "$DB"
+echo
+"$BUILD_DIR/bin/objdb" db complete --db "$DB" --session session_1 \
+  --out "$(dirname "$DB")/session_1_completed.ply"
