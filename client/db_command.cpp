@@ -8,6 +8,8 @@
 #include <sstream>
 #include <string>
 
+#include <nlohmann/json.hpp>
+
 #include "absl/strings/str_format.h"
 #include "client/cli_util.h"
 #include "client/commands.h"
@@ -131,8 +133,9 @@ int exportModel(const storage::SqliteStore& store, long long id, const std::stri
   return 0;
 }
 
-// The parameters a session was processed with (the defaults where the stored text is not a
-// parameter object, as in files written before sessions recorded them), then `config` on top.
+// The parameters a session was processed with (the defaults where the stored text is not a JSON
+// object, as in files written before sessions recorded them), then `config` on top. Stored
+// parameters that do not apply (an unknown key, a bad value) are an error, never ignored.
 StatusOr<Params> sessionParams(const storage::SqliteStore& store, const std::string& session,
                                const std::string& config, std::string* origin) {
   OBJDB_ASSIGN_OR_RETURN(const auto sessions, store.sessions());
@@ -142,11 +145,14 @@ StatusOr<Params> sessionParams(const storage::SqliteStore& store, const std::str
   for (const auto& s : sessions) {
     if (s.name != session) continue;
     known = true;
-    Params stored;
-    if (applyParamsJson(s.params_json, &stored).ok()) {
-      params = stored;
-      *origin = "the session's stored parameters";
+    const auto parsed = nlohmann::json::parse(s.params_json, nullptr, /*allow_exceptions=*/false);
+    if (!parsed.is_object()) continue;  // e.g. "config file X" in files of earlier versions
+    if (Status applied = applyParamsJson(s.params_json, &params); !applied.ok()) {
+      return absl::FailedPreconditionError(absl::StrFormat(
+          "session %s: its stored parameters do not apply (%s); written by another version?",
+          session, applied.message()));
     }
+    *origin = "the session's stored parameters";
   }
   if (!known) {
     return absl::NotFoundError(absl::StrFormat("no session %s in %s", session, store.path()));

@@ -116,7 +116,7 @@ Status MergingParams::validate() const {
   OBJDB_RETURN_IF_ERROR(
       inRange(tsdf_min_overlap_voxels, 0.0, 1e9, "merging.tsdf_min_overlap_voxels"));
   OBJDB_RETURN_IF_ERROR(
-      inRange(completion_margin_voxels, 0, 16, "merging.completion_margin_voxels"));
+      inRange(completion_margin_voxels, 0, 4, "merging.completion_margin_voxels"));
   return positive(reference_voxel_size_m, "merging.reference_voxel_size_m");
 }
 

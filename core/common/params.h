@@ -141,7 +141,8 @@ struct MergingParams {
   // of the model's own surface voxels. Beyond them a model grid holds the truncation band of
   // whatever surrounded each observation (floor, walls, neighbours), which is not the object.
   // 1 measured on the lounge: 28 % of the added surface on a true surface (27 % unrestricted),
-  // completion gain +1.3 points (+1.4).
+  // completion gain +1.3 points (+1.4). At most 4: the region has (2 · margin + 1)³ voxels per
+  // surface voxel, and a truncation band of 3 voxels is covered at 3.
   int completion_margin_voxels = 1;
   double minOverlapVoxels(double voxel_size_m) const;
   Status validate() const;

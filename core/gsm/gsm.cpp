@@ -164,6 +164,25 @@ void Gsm::merge(Label keep, Label gone) {
   k.bounds.extend(g.bounds);
   info_.erase(gone);
   parent_[gone] = keep;
+  // The pair evidence of the merged-away label now belongs to the survivor (summed where both
+  // had some with the same partner); the pair itself is gone. Merges are rare: a linear scan.
+  std::vector<std::pair<Label, PairEvidence>> moved;
+  for (auto it = pair_evidence_.begin(); it != pair_evidence_.end();) {
+    const Label a = Label(it->first >> 32), b = Label(it->first & 0xffffffffULL);
+    if (a != gone && b != gone) {
+      ++it;
+      continue;
+    }
+    const Label partner = a == gone ? b : a;
+    if (partner != keep) moved.emplace_back(partner, it->second);
+    pair_evidence_.erase(it++);
+  }
+  pair_evidence_.erase(packPair(keep, gone));
+  for (const auto& [partner, e] : moved) {
+    PairEvidence& to = pair_evidence_[packPair(keep, partner)];
+    to.joint += e.joint;
+    to.separate += e.separate;
+  }
 }
 
 StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
@@ -260,7 +279,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   absl::flat_hash_set<uint64_t> seen_this_frame;
   for (const auto& [n, s, g] : pairs) {
     const Label assigned = result.segment_labels[size_t(s - 1)];
-    if (assigned == 0 || assigned == g) continue;
+    if (assigned == 0 || resolve(assigned) == resolve(g)) continue;
     const uint64_t key = packPair(resolve(assigned), resolve(g));
     if (taken.count(g)) {
       // Touching, and each claimed by its own segment: evidence that they are two objects.

@@ -122,7 +122,7 @@ void writeTwoSessions(const fs::path& path) {
 TEST(DbCommand, CompletesASessionsSceneWithTheMergedModels) {
   testing::TempDir dir;
   const fs::path db = dir / "objects.sqlite";
-  writeTwoSessions(db);
+  ASSERT_NO_FATAL_FAILURE(writeTwoSessions(db));
   const fs::path out = dir / "monday.ply";
   ProcessResult r = runProcess(
       {kObjdb, "db", "complete", "--db", db.string(), "--session", "monday", "--out", out.string()});

@@ -83,7 +83,7 @@ TEST(CompleteScene, FillsTheObjectButNotWhatStoodNearItInAnotherSession) {
   Fixture f;
   ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
   gsm::RawSegment tuesday = rawSegment(1, kTuesday, kBack);
-  // A vertical plate at object-frame y = 0.3 (the box is 0.2 wide), x and z in [0, 0.12]: its
+  // A vertical plate at object-frame y = 0.3 (the shape reaches y = 0.15), x and z in [0, 0.12]: its
   // band of ±3 voxels, written into the segment's grid (segment frame = world frame here).
   const float voxel = tuesday.grid.voxelSize();
   const Eigen::Isometry3f T_object_world = kTuesday.T_world_object.inverse().cast<float>();
@@ -112,15 +112,24 @@ TEST(CompleteScene, FillsTheObjectButNotWhatStoodNearItInAnotherSession) {
   ASSERT_FALSE(f.store.scene("monday").value()->interpolateDistance(plate_world, &d));
 
   Params p = params();
-  auto completed = completeScene(f.store, "monday", p.merging, 1000.0f, nullptr);
+  CompletionReport report;
+  auto completed = completeScene(f.store, "monday", p.merging, 1000.0f, &report);
   ASSERT_TRUE(completed.ok()) << completed.status();
+  ASSERT_EQ(report.placements.size(), 1u);
   EXPECT_TRUE(completed->interpolateDistance(back_world, &d));
   EXPECT_FALSE(completed->interpolateDistance(plate_world, &d)) << "the plate was pasted: " << d;
-  // Without the margin rule (a margin wider than the plate's distance) the plate comes along.
-  p.merging.completion_margin_voxels = 16;
-  auto unrestricted = completeScene(f.store, "monday", p.merging, 1000.0f, nullptr);
-  ASSERT_TRUE(unrestricted.ok());
-  EXPECT_TRUE(unrestricted->interpolateDistance(plate_world, &d));
+  // The largest margin (4 voxels, 8 cm) does not reach it either.
+  p.merging.completion_margin_voxels = 4;
+  auto widest = completeScene(f.store, "monday", p.merging, 1000.0f, nullptr);
+  ASSERT_TRUE(widest.ok());
+  EXPECT_FALSE(widest->interpolateDistance(plate_world, &d));
+  // The model's whole grid, filled at the same placement, brings the plate along: the region is
+  // what keeps it out.
+  const auto model = f.store.model(report.placements[0].model_id).value();
+  tsdf::TsdfLayer whole = f.store.scene("monday").value()->clone();
+  matching::mergeGrids(&whole, model->grid, report.placements[0].T_world_object, 1000.0f,
+                       matching::MergeMode::kFillUnobserved);
+  EXPECT_TRUE(whole.interpolateDistance(plate_world, &d));
 }
 
 TEST(CompleteScene, SingleSegmentModelsAddNothingAndAMissingSceneIsAnError) {
