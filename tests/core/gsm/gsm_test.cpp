@@ -1,6 +1,7 @@
 #include "core/gsm/gsm.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -193,6 +194,73 @@ TEST(Gsm, LabelsSeenApartNeedJointFramesInProportionToMerge) {
     EXPECT_EQ(frame(false), 1u);
     EXPECT_EQ(gsm.resolve(left), gsm.resolve(right)) << "5 frames together, 5 apart";
   }
+}
+
+// The floor 1, and the box cut into three vertical slices (left, middle, right) whose segment
+// labels are given (0: the slice is in no segment).
+segmentation::LabelImage sliceLabels(const InstanceImage& instances,
+                                     const std::array<int32_t, 3>& slice_label) {
+  int u_min = instances.width, u_max = 0;
+  for (int v = 0; v < instances.height; ++v) {
+    for (int u = 0; u < instances.width; ++u) {
+      if (instances.at(u, v) == 2) {
+        u_min = std::min(u_min, u);
+        u_max = std::max(u_max, u);
+      }
+    }
+  }
+  segmentation::LabelImage labels(instances.width, instances.height, 0);
+  const int width = std::max(1, u_max - u_min + 1);
+  for (int v = 0; v < instances.height; ++v) {
+    for (int u = 0; u < instances.width; ++u) {
+      const uint16_t id = instances.at(u, v);
+      if (id == 1) labels.at(u, v) = 1;
+      if (id == 2) labels.at(u, v) = slice_label[size_t(std::min(2, 3 * (u - u_min) / width))];
+    }
+  }
+  return labels;
+}
+
+// When a label merges into another, what was known about its neighbours goes with it: the left
+// slice, seen apart from the middle one for many frames, does not merge with the middle+right
+// label after two joint frames just because the middle label merged away.
+TEST(Gsm, AMergeHandsThePairEvidenceToTheSurvivingLabel) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  Gsm gsm = makeGsm(k);  // merge_min_joint_share 0.5
+  int f = 0;
+  auto frame = [&](const std::array<int32_t, 3>& slices) {
+    const Transform T = world.camera(0.02 * f++);
+    renderer.render(world.instances(), T, &out);
+    auto r = gsm.integrate(out.depth, sliceLabels(out.instances, slices), T);
+    EXPECT_TRUE(r.ok()) << r.status();
+    return r.ok() ? r->segment_labels : std::vector<Label>{};
+  };
+  // Frame 0: left and right slices only, so the middle label is the newest of the three.
+  const std::vector<Label> first = frame({2, 0, 3});
+  ASSERT_EQ(first.size(), 3u);
+  const Label left = first[1], right = first[2];
+  // Six frames apart: three segments, three labels.
+  Label middle = 0;
+  for (int i = 0; i < 6; ++i) {
+    const std::vector<Label> labels = frame({2, 3, 4});
+    ASSERT_EQ(labels.size(), 4u);
+    EXPECT_EQ(labels[1], left);
+    EXPECT_EQ(labels[3], right);
+    middle = labels[2];
+  }
+  ASSERT_NE(middle, 0u);
+  ASSERT_LT(right, middle);
+  // Middle and right as one segment until their labels merge (the older, right, survives).
+  for (int i = 0; i < 20 && gsm.resolve(middle) != gsm.resolve(right); ++i) frame({2, 3, 3});
+  ASSERT_EQ(gsm.resolve(middle), right);
+  // Now the whole box as one segment: two joint frames do not outweigh the frames apart.
+  frame({2, 2, 2});
+  frame({2, 2, 2});
+  EXPECT_NE(gsm.resolve(left), gsm.resolve(right))
+      << "the left/middle evidence was lost when the middle label merged";
 }
 
 TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {
