@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -30,8 +31,8 @@ struct World {
   }
 };
 
-segmentation::LabelImage labelsFrom(const InstanceImage& instances, bool split_box) {
-  segmentation::LabelImage labels(instances.width, instances.height, 0);
+// The first and last image column the box (instance 2) covers.
+std::pair<int, int> boxColumns(const InstanceImage& instances) {
   int u_min = instances.width, u_max = 0;
   for (int v = 0; v < instances.height; ++v) {
     for (int u = 0; u < instances.width; ++u) {
@@ -41,6 +42,12 @@ segmentation::LabelImage labelsFrom(const InstanceImage& instances, bool split_b
       }
     }
   }
+  return {u_min, u_max};
+}
+
+segmentation::LabelImage labelsFrom(const InstanceImage& instances, bool split_box) {
+  segmentation::LabelImage labels(instances.width, instances.height, 0);
+  const auto [u_min, u_max] = boxColumns(instances);
   const int middle = (u_min + u_max) / 2;
   for (int v = 0; v < instances.height; ++v) {
     for (int u = 0; u < instances.width; ++u) {
@@ -200,15 +207,7 @@ TEST(Gsm, LabelsSeenApartNeedJointFramesInProportionToMerge) {
 // labels are given (0: the slice is in no segment).
 segmentation::LabelImage sliceLabels(const InstanceImage& instances,
                                      const std::array<int32_t, 3>& slice_label) {
-  int u_min = instances.width, u_max = 0;
-  for (int v = 0; v < instances.height; ++v) {
-    for (int u = 0; u < instances.width; ++u) {
-      if (instances.at(u, v) == 2) {
-        u_min = std::min(u_min, u);
-        u_max = std::max(u_max, u);
-      }
-    }
-  }
+  const auto [u_min, u_max] = boxColumns(instances);
   segmentation::LabelImage labels(instances.width, instances.height, 0);
   const int width = std::max(1, u_max - u_min + 1);
   for (int v = 0; v < instances.height; ++v) {
