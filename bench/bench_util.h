@@ -10,6 +10,8 @@
 
 #include "core/common/frame.h"
 #include "core/common/intrinsics.h"
+#include "core/common/mesh.h"
+#include "core/sim/scene.h"
 
 namespace objdb::bench {
 
@@ -35,6 +37,17 @@ void forEachInstancePoint(const Frame& frame, const Intrinsics& k, float max_ran
       fn(T * Eigen::Vector3f(float((u - k.cx) * z / k.fx), float((v - k.cy) * z / k.fy), z), id);
     }
   }
+}
+
+// Every instance's mesh (objects, floor, walls) in the world frame: the scene's true surfaces.
+inline TriangleMesh trueSurface(const sim::BuiltScene& built) {
+  TriangleMesh out;
+  for (const auto& instance : built.instances) {
+    TriangleMesh m = *instance.mesh;
+    m.transform(instance.T_world_object);
+    out.append(m);
+  }
+  return out;
 }
 
 }  // namespace objdb::bench

@@ -421,24 +421,14 @@ int main(int argc, char** argv) {
         placed += p.verified ? 1 : 0;
         filled += p.filled_surface_voxels;
       }
-      auto meshOf = [&](const tsdf::TsdfLayer& layer) {
-        tsdf::TsdfLayer copy = layer.clone();
-        tsdf::MeshLayer mesher(params.tsdf.mesh_min_weight);
-        mesher.update(&copy, true);
-        return mesher.mesh();
-      };
-      const TriangleMesh before_mesh = meshOf(*scene), after_mesh = meshOf(*completed);
+      const TriangleMesh before_mesh = tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight);
+      const TriangleMesh after_mesh = tsdf::extractMesh(*completed, params.tsdf.mesh_min_weight);
       before_of.emplace(name, MeshDistance::create(before_mesh, 0.02f).value());
       after_of.emplace(name, MeshDistance::create(after_mesh, 0.02f).value());
       // What completion added (surface farther than 2 cm from the measured reconstruction), and
       // how much of it lies on a true surface of the scene (objects, floor and walls).
-      TriangleMesh truth_mesh;
-      for (const auto& instance : built_scenes[size_t(si)].instances) {
-        TriangleMesh m = *instance.mesh;
-        m.transform(instance.T_world_object);
-        truth_mesh.append(m);
-      }
-      const auto truth_index = MeshDistance::create(truth_mesh, 0.02f).value();
+      const auto truth_index =
+          MeshDistance::create(bench::trueSurface(built_scenes[size_t(si)]), 0.02f).value();
       for (const auto& v : after_mesh.vertices) {
         if (before_of.at(name).distance(v) <= 0.02f) continue;
         ++added_vertices;
@@ -542,13 +532,13 @@ int main(int argc, char** argv) {
     if (!ms.empty()) {
       const auto& s = slowest.timings;
       std::printf("slowest insert: %.0f ms = replacing an earlier contribution %.0f, "
-                  "cloud+planarity %.0f, keypoints %.0f, descriptors %.0f, prefilter %.0f, loading %zu candidates %.0f, matching+registration %.0f, model "
-                  "checks %.0f, scene checks %.0f (these three summed over candidates, on %d "
-                  "threads), storing the result %.0f\n",
+                  "cloud+planarity %.0f, keypoints %.0f, descriptors %.0f, prefilter %.0f, "
+                  "loading %zu candidates %.0f, matching+registration %.0f, model checks %.0f, "
+                  "scene checks %.0f (these three summed over candidates, on %d threads), "
+                  "storing the result %.0f\n",
                   s.total_ms, s.replace_ms, s.cloud_ms, s.keypoints_ms, s.descriptors_ms,
-                  s.prefilter_ms,
-                  slowest.candidates, s.load_ms, s.match_register_ms, s.model_verify_ms,
-                  s.scene_verify_ms, params.database.threads, s.store_ms);
+                  s.prefilter_ms, slowest.candidates, s.load_ms, s.match_register_ms,
+                  s.model_verify_ms, s.scene_verify_ms, params.database.threads, s.store_ms);
     }
     if (!ms.empty()) {
       double mean = 0;

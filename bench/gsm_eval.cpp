@@ -244,16 +244,8 @@ int main(int argc, char** argv) {
     if (history) {
       // Surface accuracy (the TSDF is the same in both modes): mean distance of the mesh
       // vertices to the true surfaces of the scene, searched up to 5 cm.
-      TriangleMesh truth_mesh;
-      for (const auto& instance : built.instances) {
-        TriangleMesh m = *instance.mesh;
-        m.transform(instance.T_world_object);
-        truth_mesh.append(m);
-      }
-      tsdf::MeshLayer mesher(tsdf.mesh_min_weight);
-      mesher.update(&map.tsdf(), true);
-      const TriangleMesh surface = mesher.mesh();
-      const auto index = MeshDistance::create(truth_mesh, 0.05f).value();
+      const TriangleMesh surface = tsdf::extractMesh(map.tsdf(), tsdf.mesh_min_weight);
+      const auto index = MeshDistance::create(bench::trueSurface(built), 0.05f).value();
       std::vector<float> distances;
       distances.reserve(surface.vertices.size());
       for (const auto& v : surface.vertices) distances.push_back(index.distance(v));

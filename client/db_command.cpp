@@ -120,10 +120,7 @@ int exportModel(const storage::SqliteStore& store, long long id, const std::stri
     written = io::writePlyCloud(out, (*m)->cloud);
     count = (*m)->cloud.points.size();
   } else {
-    tsdf::TsdfLayer grid = (*m)->grid.clone();
-    tsdf::MeshLayer mesher(min_weight);
-    mesher.update(&grid, true);
-    const TriangleMesh mesh = mesher.mesh();
+    const TriangleMesh mesh = tsdf::extractMesh((*m)->grid, min_weight);
     written = io::writePlyMesh(out, mesh);
     count = mesh.vertices.size();
   }
@@ -185,13 +182,8 @@ int complete(const storage::SqliteStore& store, const std::string& session, cons
   if (!completed.ok()) return cli::reportError(kCommand, completed.status());
   const auto scene = store.scene(session);
   if (!scene.ok()) return cli::reportError(kCommand, scene.status());
-  auto meshOf = [&](const tsdf::TsdfLayer& layer) {
-    tsdf::TsdfLayer copy = layer.clone();
-    tsdf::MeshLayer mesher(params->tsdf.mesh_min_weight);
-    mesher.update(&copy, true);
-    return mesher.mesh();
-  };
-  const TriangleMesh before = meshOf(**scene), after = meshOf(*completed);
+  const TriangleMesh before = tsdf::extractMesh(**scene, params->tsdf.mesh_min_weight);
+  const TriangleMesh after = tsdf::extractMesh(*completed, params->tsdf.mesh_min_weight);
   if (Status written = io::writePlyMesh(out, after); !written.ok()) {
     return cli::reportError(kCommand, written);
   }

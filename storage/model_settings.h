@@ -1,9 +1,8 @@
 // One database file, one way of describing models. The model, keypoint and descriptor parameters,
 // the voxel size and the mesh weight decide what a stored model's cloud, keypoints and FPFH
-// descriptors are;
-// models described differently do not match each other (an FPFH over a 2 cm surface is not
-// comparable with one over the 1 cm cloud), so adding sessions with other settings would silently
-// stop repeated objects from merging. Sessions store their effective parameters (SessionInfo::
+// descriptors are; models described differently do not match each other (an FPFH over a 2 cm
+// surface is not comparable with one over the 1 cm cloud), so adding sessions with other
+// settings would silently stop repeated objects from merging. Sessions store their effective parameters (SessionInfo::
 // params_json); this check compares them with the parameters of a new session.
 #pragma once
 

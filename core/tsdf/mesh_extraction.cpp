@@ -208,4 +208,11 @@ TriangleMesh MeshLayer::mesh() const {
   return out;
 }
 
+TriangleMesh extractMesh(const TsdfLayer& layer, float min_weight) {
+  TsdfLayer copy = layer.clone();
+  MeshLayer mesher(min_weight);
+  mesher.update(&copy, true);
+  return mesher.mesh();
+}
+
 }  // namespace objdb::tsdf

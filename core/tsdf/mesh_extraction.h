@@ -19,6 +19,9 @@ namespace objdb::tsdf {
 // colours are interpolated; normals are not set.
 TriangleMesh meshBlock(const TsdfLayer& layer, const BlockIndex& index, float min_weight);
 
+// The whole surface of `layer` at once (a MeshLayer over a copy: the layer's update marks stay).
+TriangleMesh extractMesh(const TsdfLayer& layer, float min_weight);
+
 // Per-block meshes kept up to date incrementally.
 class MeshLayer {
  public:
