@@ -10,13 +10,20 @@ namespace {
 // What each RPC waits for (DESIGN.md "Data flow").
 const std::map<std::string, std::string>& pendingFeatures() {
   static const auto* features = new std::map<std::string, std::string>{
-      {"Ingest", "sessions: frame decoding, depth segmentation and GSM fusion"},
-      {"EndSession", "sessions: segment extraction and the object-database insert"},
-      {"ListSessions", "queries over the opened database (storage/ is in place)"},
-      {"ListObjects", "queries over the opened database (storage/ is in place)"},
-      {"GetObject", "queries over the opened database (storage/ is in place)"},
-      {"GetSceneMesh", "the session map (TSDF meshing) and scene completion"},
-      {"GetStats", "queries over the opened database and the session pipeline"},
+      {"Ingest", "the server's session pipeline: a stream worker that decodes frames and runs "
+                 "them through segmentation, the GSM and the object database (offline today: "
+                 "`objdb ingest`)"},
+      {"EndSession", "the server's session pipeline: flushing the GSM, storing the scene map and "
+                     "ending the session (offline today: `objdb ingest`)"},
+      {"ListSessions", "the proto conversion of the stored sessions (offline today: `objdb db "
+                       "stats`)"},
+      {"ListObjects", "the proto conversion and paging of the stored models (offline today: "
+                      "`objdb db models`)"},
+      {"GetObject", "the proto conversion of a stored model (offline today: `objdb db export`)"},
+      {"GetSceneMesh", "streaming a session's (completed) mesh in chunks (offline today: "
+                       "`objdb db complete`)"},
+      {"GetStats", "the proto conversion of the store's statistics and the session pipeline's "
+                   "counters (offline today: `objdb db stats`)"},
   };
   return *features;
 }
