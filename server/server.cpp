@@ -10,7 +10,7 @@
 #include <utility>
 
 #include "core/common/logging.h"
-#include "server/pending_object_database.h"
+#include "server/object_database_service.h"
 
 namespace objdb {
 namespace {
@@ -110,6 +110,10 @@ Status ServerOptions::validate() const {
                         static_cast<int64_t>(drain_deadline.count()),
                         static_cast<int64_t>(kMaxDrainDeadline.count())));
   }
+  if (frame_queue < 1 || frame_queue > 1024) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("frame_queue is %d frames, must be in [1, 1024]", frame_queue));
+  }
   return annotate(params.validate(), "params");
 }
 
@@ -120,8 +124,13 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<storage::SqliteStore> store,
                          storage::SqliteStore::open(options.db_path));
 
+  server::ServiceOptions service_options;
+  service_options.params = options.params;
+  service_options.frame_queue = size_t(options.frame_queue);
+  service_options.max_send_message_bytes = size_t(options.max_send_message_bytes);
+  OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<server::ObjectDatabaseService> service,
+                         server::ObjectDatabaseService::create(service_options, store.get()));
   grpc::EnableDefaultHealthCheckService(true);
-  auto service = std::make_unique<PendingObjectDatabaseService>();
   grpc::ServerBuilder builder;
   builder.RegisterService(service.get());
   int port = 0;
@@ -144,8 +153,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   }
   if (grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService()) {
     health->SetServingStatus(true);
-    // The server is up, but the API itself does not work yet: say so to anyone who asks.
-    health->SetServingStatus(kObjectDatabaseServiceName, false);
+    health->SetServingStatus(kObjectDatabaseServiceName, true);
   }
   std::unique_ptr<ObjdbServer> result(new ObjdbServer(
       options, std::move(store), std::move(service), std::move(server), address.host, port));
@@ -154,7 +162,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
 }
 
 ObjdbServer::ObjdbServer(ServerOptions options, std::unique_ptr<storage::SqliteStore> store,
-                         std::unique_ptr<PendingObjectDatabaseService> service,
+                         std::unique_ptr<server::ObjectDatabaseService> service,
                          std::unique_ptr<grpc::Server> server, std::string host, int port)
     : options_(std::move(options)),
       store_(std::move(store)),
@@ -178,6 +186,8 @@ void ObjdbServer::shutdown() {
   }
   server_->Shutdown(std::chrono::system_clock::now() + options_.drain_deadline);
   server_->Wait();
+  // No call in flight any more: let the session workers and the database queue finish.
+  service_->stop();
   // Copy the WAL back into the database file, so a clean stop leaves one self-contained file.
   if (const Status checkpointed = store_->checkpoint(); !checkpointed.ok()) {
     log->warn("checkpoint of {} at shutdown failed: {}", options_.db_path,

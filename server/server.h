@@ -1,7 +1,6 @@
-// The objdb gRPC server: options, listen-address policy, startup and graceful shutdown.
-// Serves the standard grpc.health.v1 health service. The ObjectDatabase RPCs land with the session
-// and storage issues; until then each answers UNIMPLEMENTED naming what it waits for, and the
-// health status of the service name "objdb.v1.ObjectDatabase" is NOT_SERVING.
+// The objdb gRPC server: options, listen-address policy, startup and graceful shutdown. Serves
+// objdb.v1.ObjectDatabase (server/object_database_service.h) over its SQLite file and the
+// standard grpc.health.v1 health service (SERVING for "" and "objdb.v1.ObjectDatabase" while up).
 #pragma once
 
 #include <atomic>
@@ -20,7 +19,9 @@ class Server;
 
 namespace objdb {
 
-class PendingObjectDatabaseService;
+namespace server {
+class ObjectDatabaseService;
+}
 
 // A parsed HOST:PORT listen address.
 struct ListenAddress {
@@ -48,14 +49,17 @@ struct ServerOptions {
   int max_send_message_bytes = 16 * 1024 * 1024;
   // On shutdown, in-flight calls get this long to finish before they are cancelled.
   std::chrono::milliseconds drain_deadline{10000};
-  // Pipeline parameters (the --config file); sessions may override them.
+  // Pipeline parameters (the --config file); sessions may override their segmentation, tsdf and
+  // gsm sections.
   Params params;
+  // Frames buffered per Ingest stream before the server stops reading it (backpressure).
+  int frame_queue = 8;
 
   // Checks every field; the message names the field and the bad value.
   Status validate() const;
 };
 
-// Health-check name of the API service (its health is NOT_SERVING until the RPCs are implemented).
+// Health-check name of the API service.
 inline constexpr char kObjectDatabaseServiceName[] = "objdb.v1.ObjectDatabase";
 
 // Bounds of ServerOptions, documented in the usage text.
@@ -93,13 +97,13 @@ class ObjdbServer {
 
  private:
   ObjdbServer(ServerOptions options, std::unique_ptr<storage::SqliteStore> store,
-              std::unique_ptr<PendingObjectDatabaseService> service,
+              std::unique_ptr<server::ObjectDatabaseService> service,
               std::unique_ptr<grpc::Server> server, std::string host, int port);
 
   const ServerOptions options_;
   std::unique_ptr<storage::SqliteStore> store_;  // outlives the services that use it
   // Declared before server_: services must outlive the grpc::Server that calls them.
-  std::unique_ptr<PendingObjectDatabaseService> service_;
+  std::unique_ptr<server::ObjectDatabaseService> service_;
   std::unique_ptr<grpc::Server> server_;
   const std::string host_;
   const int port_;

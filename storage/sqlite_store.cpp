@@ -494,6 +494,84 @@ StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t i
       std::make_shared<model::ObjectModel>(std::move(m)));
 }
 
+StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery& query) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  std::string where = query.include_merged ? "m.state IN ('active', 'merged')" : "m.state = 'active'";
+  if (!query.session.empty()) {
+    where += " AND m.id IN (SELECT o.model_id FROM observations o JOIN sessions s ON "
+             "s.id = o.session_id WHERE s.name = ?2)";
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(
+          *lease,
+          absl::StrFormat("SELECT m.id, m.state, COALESCE(m.merged_into, 0), m.planar, "
+                          "m.num_points, m.num_keypoints, COALESCE(m.voxel_size, 0), "
+                          "COALESCE(m.bbox_min_x, 0), COALESCE(m.bbox_min_y, 0), "
+                          "COALESCE(m.bbox_min_z, 0), COALESCE(m.bbox_max_x, 0), "
+                          "COALESCE(m.bbox_max_y, 0), COALESCE(m.bbox_max_z, 0), "
+                          "(SELECT COUNT(*) FROM merge_records r WHERE r.target = m.id) "
+                          "FROM models m WHERE m.id > ?1 AND %s ORDER BY m.id LIMIT ?3",
+                          where)));
+  s.bind(1, query.after_id);
+  if (!query.session.empty()) s.bind(2, query.session);
+  s.bind(3, int64_t(std::min<size_t>(query.limit, size_t(1) << 30)));
+  std::vector<ModelSummary> out;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    ModelSummary m;
+    m.id = s.columnInt(0);
+    m.state = s.columnText(1);
+    m.merged_into = s.columnInt(2);
+    m.planar = s.columnInt(3) != 0;
+    m.num_points = s.columnInt(4);
+    m.num_keypoints = s.columnInt(5);
+    m.voxel_size = s.columnDouble(6);
+    for (int k = 0; k < 3; ++k) {
+      m.bbox_min[k] = s.columnDouble(7 + k);
+      m.bbox_max[k] = s.columnDouble(10 + k);
+    }
+    m.merges = s.columnInt(13);
+    out.push_back(std::move(m));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement o,
+      Statement::prepare(*lease,
+                         "SELECT o.rowid, s.name, o.label, COALESCE(o.raw_segment_id, 0), "
+                         "o.T_world_object FROM observations o JOIN sessions s ON "
+                         "s.id = o.session_id WHERE o.model_id = ? ORDER BY o.seq"));
+  for (ModelSummary& m : out) {
+    OBJDB_RETURN_IF_ERROR(o.reset());
+    o.bind(1, m.id);
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool more, o.step());
+      if (!more) break;
+      auto T_wo = decodeTransform(o.columnBlob(4));
+      if (!T_wo.ok()) return inRow(T_wo.status(), "observations", o.columnInt(0), "T_world_object");
+      m.observations.push_back(
+          {o.columnText(1), uint32_t(o.columnInt(2)), o.columnInt(3), *T_wo});
+    }
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return out;
+}
+
+StatusOr<int64_t> SqliteStore::rawSegmentId(const database::SegmentKey& key) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease,
+                                            "SELECT r.id FROM raw_segments r JOIN sessions s ON "
+                                            "s.id = r.session_id WHERE s.name = ? AND r.label = ?"));
+  s.bind(1, key.session).bind(2, int64_t(key.label));
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  if (!row) {
+    return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+  }
+  return s.columnInt(0);
+}
+
 StatusOr<std::vector<int64_t>> SqliteStore::modelIds() const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(

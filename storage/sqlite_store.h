@@ -73,6 +73,34 @@ struct StoreStats {
   std::vector<TableStats> tables;
 };
 
+// One model's row without its blobs, with its observations: what listings need (ListObjects,
+// GetObject), cheap to read for many models.
+struct ModelSummary {
+  struct Pose {
+    std::string session;
+    uint32_t label = 0;           // GSM label of the observing raw segment
+    int64_t raw_segment_id = 0;   // raw_segments row (0 when the segment row is gone)
+    Transform T_world_object = Transform::Identity();
+  };
+  int64_t id = 0;
+  std::string state;             // "active" or "merged" (removed models are never listed)
+  int64_t merged_into = 0;       // state "merged": the model that absorbed it
+  bool planar = false;
+  int64_t num_points = 0, num_keypoints = 0;
+  double voxel_size = 0.0;
+  Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero(), bbox_max = Eigen::Vector3d::Zero();  // model frame
+  std::vector<Pose> observations;  // insertion order
+  int64_t merges = 0;              // merge records with this model as target
+};
+
+// Which models modelSummaries() returns: ids above after_id, ascending, at most `limit`.
+struct ModelQuery {
+  int64_t after_id = 0;
+  size_t limit = 100;
+  std::string session;          // only models observed in this session; empty = all
+  bool include_merged = false;  // also models in state "merged"
+};
+
 struct EncodedModel;  // a model's columns as blobs (sqlite_store.cpp)
 
 class SqliteStore : public database::ModelStore {
@@ -106,6 +134,11 @@ class SqliteStore : public database::ModelStore {
       const std::string& session) const override;
   StatusOr<std::shared_ptr<const gsm::LabelBlocks>> sceneLabels(
       const std::string& session) const override;
+
+  // Model rows without blobs (see ModelQuery), one snapshot.
+  StatusOr<std::vector<ModelSummary>> modelSummaries(const ModelQuery& query) const;
+  // The id of a stored raw segment (NOT_FOUND when none has that key).
+  StatusOr<int64_t> rawSegmentId(const database::SegmentKey& key) const;
 
   // Sessions. beginSession creates the session (ALREADY_EXISTS when the name is taken);
   // a session row is also created implicitly, state open, by the first data stored for it.

@@ -2,7 +2,7 @@
 
 #include <array>
 #include <cstring>
-#include <fstream>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -32,35 +32,36 @@ uint32_t bigEndian32(const unsigned char* p) {
 
 // Walks the JPEG marker segments up to the first start-of-frame, which holds the image size.
 // Leaves width/height at -1 when it cannot tell (OpenCV then decides).
-void scanJpegHeader(std::ifstream& in, HeaderInfo* info) {
-  in.seekg(2);
+void scanJpegHeader(std::string_view bytes, HeaderInfo* info) {
+  size_t pos = 2;
+  auto at = [&](size_t i) { return i < bytes.size() ? int(static_cast<unsigned char>(bytes[i])) : -1; };
   for (int segment = 0; segment < 4096; ++segment) {
-    int c = in.get();
+    int c = at(pos++);
     if (c != 0xFF) return;
-    while (c == 0xFF) c = in.get();  // fill bytes
-    if (c == EOF) return;
+    while (c == 0xFF) c = at(pos++);  // fill bytes
+    if (c < 0) return;
     const int marker = c;
     if (marker == 0xD8 || marker == 0x01 || (marker >= 0xD0 && marker <= 0xD7)) continue;
     if (marker == 0xD9 || marker == 0xDA) return;  // end of image / start of scan
-    unsigned char length_bytes[2];
-    if (!in.read(reinterpret_cast<char*>(length_bytes), 2)) return;
-    const int length = (length_bytes[0] << 8) | length_bytes[1];
+    if (pos + 2 > bytes.size()) return;
+    const int length = (at(pos) << 8) | at(pos + 1);
+    pos += 2;
     if (length < 2) return;
     const bool is_sof =
         marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
     if (is_sof) {
-      unsigned char sof[5];
-      if (length < 7 || !in.read(reinterpret_cast<char*>(sof), 5)) return;
-      info->height = (sof[1] << 8) | sof[2];
-      info->width = (sof[3] << 8) | sof[4];
+      if (length < 7 || pos + 5 > bytes.size()) return;
+      info->height = (at(pos + 1) << 8) | at(pos + 2);
+      info->width = (at(pos + 3) << 8) | at(pos + 4);
       return;
     }
-    in.seekg(length - 2, std::ios::cur);
-    if (!in) return;
+    pos += size_t(length - 2);
+    if (pos > bytes.size()) return;
   }
 }
 
-StatusOr<HeaderInfo> readHeader(const fs::path& path) {
+// The file's bytes; errors name the file (missing, not a regular file, unreadable).
+StatusOr<std::string> readImageFile(const fs::path& path) {
   std::error_code ec;
   const auto status = fs::status(path, ec);
   if (!fs::exists(status)) {
@@ -70,22 +71,28 @@ StatusOr<HeaderInfo> readHeader(const fs::path& path) {
     return absl::InvalidArgumentError(
         absl::StrCat("image ", path.string(), " is not a regular file"));
   }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::UnavailableError(absl::StrCat("cannot open image ", path.string()));
-  std::array<unsigned char, 33> head{};
-  in.read(reinterpret_cast<char*>(head.data()), head.size());
-  const size_t got = static_cast<size_t>(in.gcount());
-  in.clear();
+  auto bytes = internal::readFile(path);
+  if (!bytes.ok()) {
+    return absl::UnavailableError(
+        absl::StrCat("cannot read image ", path.string(), ": ", bytes.status().message()));
+  }
+  return bytes;
+}
+
+// What the encoded image's header says; `name` names it in errors.
+StatusOr<HeaderInfo> readHeader(std::string_view bytes, const std::string& name) {
+  const auto* head = reinterpret_cast<const unsigned char*>(bytes.data());
+  const size_t got = bytes.size();
   HeaderInfo info;
   static constexpr unsigned char kPngSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
-  if (got >= 8 && std::memcmp(head.data(), kPngSignature, 8) == 0) {
+  if (got >= 8 && std::memcmp(head, kPngSignature, 8) == 0) {
     info.format = FileFormat::kPng;
-    if (got < 33 || std::memcmp(head.data() + 12, "IHDR", 4) != 0) {
+    if (got < 33 || std::memcmp(head + 12, "IHDR", 4) != 0) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path.string(), " is a truncated PNG (no IHDR header)"));
+          absl::StrCat(name, " is a truncated PNG (no IHDR header)"));
     }
-    info.width = bigEndian32(head.data() + 16);
-    info.height = bigEndian32(head.data() + 20);
+    info.width = bigEndian32(head + 16);
+    info.height = bigEndian32(head + 20);
     info.bit_depth = head[24];
     switch (head[25]) {
       case 0:
@@ -105,43 +112,42 @@ StatusOr<HeaderInfo> readHeader(const fs::path& path) {
         break;
       default:
         return absl::InvalidArgumentError(
-            absl::StrFormat("%s has an invalid PNG colour type %d", path.string(), int(head[25])));
+            absl::StrFormat("%s has an invalid PNG colour type %d", name, int(head[25])));
     }
   } else if (got >= 3 && head[0] == 0xFF && head[1] == 0xD8 && head[2] == 0xFF) {
     info.format = FileFormat::kJpeg;
-    scanJpegHeader(in, &info);
+    scanJpegHeader(bytes, &info);
   }
   return info;
 }
 
-Status checkHeaderSize(const fs::path& path, const HeaderInfo& info) {
+Status checkHeaderSize(const std::string& name, const HeaderInfo& info) {
   if (info.width < 0) return absl::OkStatus();
   if (info.width >= 1 && info.width <= kMaxImageSide && info.height >= 1 &&
       info.height <= kMaxImageSide) {
     return absl::OkStatus();
   }
   return absl::InvalidArgumentError(absl::StrFormat("%s is %dx%d pixels; expected 1..%d per side",
-                                                    path.string(), info.width, info.height,
+                                                    name, info.width, info.height,
                                                     kMaxImageSide));
 }
 
-StatusOr<cv::Mat> decode(const fs::path& path) {
+StatusOr<cv::Mat> decode(std::string_view bytes, const std::string& name) {
   cv::Mat mat;
   try {
-    mat = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+    const cv::Mat buffer(1, int(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
+    mat = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("cannot decode image ", path.string(), ": ", e.what()));
+    return absl::InvalidArgumentError(absl::StrCat("cannot decode image ", name, ": ", e.what()));
   }
   if (mat.empty()) {
     return absl::InvalidArgumentError(
-        absl::StrCat("cannot decode image ", path.string(), " (corrupt or truncated file)"));
+        absl::StrCat("cannot decode image ", name, " (corrupt or truncated data)"));
   }
   if (!(mat.dims == 2 && mat.cols >= 1 && mat.cols <= kMaxImageSide && mat.rows >= 1 &&
         mat.rows <= kMaxImageSide)) {
     return absl::InvalidArgumentError(absl::StrFormat("%s is %dx%d pixels; expected 1..%d per side",
-                                                      path.string(), mat.cols, mat.rows,
-                                                      kMaxImageSide));
+                                                      name, mat.cols, mat.rows, kMaxImageSide));
   }
   return mat;
 }
@@ -205,26 +211,26 @@ Status encodeAndWrite(const fs::path& path, const cv::Mat& mat) {
 
 }  // namespace
 
-StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
-  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(path));
+StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name) {
+  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(bytes, name));
   if (header.format != FileFormat::kPng) {
     return absl::InvalidArgumentError(
-        absl::StrCat(path.string(), " is not a PNG file; expected a 16-bit single-channel PNG"));
+        absl::StrCat(name, " is not a PNG file; expected a 16-bit single-channel PNG"));
   }
-  OBJDB_RETURN_IF_ERROR(checkHeaderSize(path, header));
+  OBJDB_RETURN_IF_ERROR(checkHeaderSize(name, header));
   if (header.bit_depth != 16) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "%s is %d-bit; expected 16-bit single channel", path.string(), header.bit_depth));
+        "%s is %d-bit; expected 16-bit single channel", name, header.bit_depth));
   }
   if (header.channels != 1) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "%s has %d channels; expected 16-bit single channel", path.string(), header.channels));
+        "%s has %d channels; expected 16-bit single channel", name, header.channels));
   }
-  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(path));
+  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(bytes, name));
   if (mat.depth() != CV_16U || mat.channels() != 1) {
     return absl::InvalidArgumentError(
         absl::StrFormat("%s decodes as %s with %d channels; expected 16-bit single channel",
-                        path.string(), depthName(mat.depth()), mat.channels()));
+                        name, depthName(mat.depth()), mat.channels()));
   }
   RawDepthImage image(mat.cols, mat.rows);
   for (int v = 0; v < mat.rows; ++v) {
@@ -233,32 +239,37 @@ StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
   return image;
 }
 
+StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
+  OBJDB_ASSIGN_OR_RETURN(const std::string bytes, readImageFile(path));
+  return decodeUint16Png(bytes, path.string());
+}
+
 Status writeUint16Png(const fs::path& path, const Image<uint16_t>& image) {
   OBJDB_RETURN_IF_ERROR(checkImageForWrite(path, image.width, image.height, image.data.size()));
   const cv::Mat mat(image.height, image.width, CV_16UC1, const_cast<uint16_t*>(image.data.data()));
   return encodeAndWrite(path, mat);
 }
 
-StatusOr<ColorImage> readColorImage(const fs::path& path) {
-  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(path));
+StatusOr<ColorImage> decodeColorImage(std::string_view bytes, const std::string& name) {
+  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(bytes, name));
   if (header.format == FileFormat::kOther) {
     return absl::InvalidArgumentError(
-        absl::StrCat(path.string(), " is neither PNG nor JPEG; expected an 8-bit colour image"));
+        absl::StrCat(name, " is neither PNG nor JPEG; expected an 8-bit colour image"));
   }
-  OBJDB_RETURN_IF_ERROR(checkHeaderSize(path, header));
+  OBJDB_RETURN_IF_ERROR(checkHeaderSize(name, header));
   if (header.format == FileFormat::kPng && header.bit_depth > 8) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "%s is %d-bit; expected an 8-bit colour image", path.string(), header.bit_depth));
+        "%s is %d-bit; expected an 8-bit colour image", name, header.bit_depth));
   }
-  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(path));
+  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(bytes, name));
   if (mat.depth() != CV_8U) {
     return absl::InvalidArgumentError(absl::StrFormat("%s is %s; expected an 8-bit colour image",
-                                                      path.string(), depthName(mat.depth())));
+                                                      name, depthName(mat.depth())));
   }
   const int channels = mat.channels();
   if (channels != 3 && channels != 1) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "%s has %d channels; expected 3 (colour) or 1 (grey)", path.string(), channels));
+        "%s has %d channels; expected 3 (colour) or 1 (grey)", name, channels));
   }
   ColorImage image(mat.cols, mat.rows);
   for (int v = 0; v < mat.rows; ++v) {
@@ -271,6 +282,11 @@ StatusOr<ColorImage> readColorImage(const fs::path& path) {
     }
   }
   return image;
+}
+
+StatusOr<ColorImage> readColorImage(const fs::path& path) {
+  OBJDB_ASSIGN_OR_RETURN(const std::string bytes, readImageFile(path));
+  return decodeColorImage(bytes, path.string());
 }
 
 Status writeColorPng(const fs::path& path, const ColorImage& image) {

@@ -3,6 +3,8 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
+#include <string_view>
 
 #include "core/common/image.h"
 
@@ -10,10 +12,14 @@ namespace objdb::io {
 
 // 16-bit single-channel PNG (depth in sensor units, or instance ids).
 StatusOr<RawDepthImage> readUint16Png(const std::filesystem::path& path);
+// The same from an encoded PNG in memory (a frame on the wire); `name` names it in errors. The
+// header's size is checked before anything is decoded.
+StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name);
 Status writeUint16Png(const std::filesystem::path& path, const Image<uint16_t>& image);
 
 // 8-bit colour image (PNG or JPEG, 3 channels; grey images are expanded), RGB order.
 StatusOr<ColorImage> readColorImage(const std::filesystem::path& path);
+StatusOr<ColorImage> decodeColorImage(std::string_view bytes, const std::string& name);
 Status writeColorPng(const std::filesystem::path& path, const ColorImage& image);
 
 }  // namespace objdb::io

@@ -1,4 +1,4 @@
-// ObjdbServer over loopback (ephemeral ports): health, UNIMPLEMENTED API, limits, shutdown; and
+// ObjdbServer over loopback (ephemeral ports): health, limits, shutdown; and
 // the ServerOptions / listen-address policy.
 #include "server/server.h"
 
@@ -12,7 +12,6 @@
 
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "objdb/v1/objdb.grpc.pb.h"
-#include "server/pending_object_database.h"
 #include "tests/support/temp_dir.h"
 
 namespace objdb {
@@ -77,13 +76,13 @@ TEST(ObjdbServer, StartsOnEphemeralLoopbackPortAndReportsServing) {
   EXPECT_EQ(response.status(), HealthCheckResponse::SERVING);
 }
 
-TEST(ObjdbServer, HealthOfTheApiServiceIsNotServingUntilItsRpcsExist) {
+TEST(ObjdbServer, HealthOfTheApiServiceIsServing) {
   auto server = startOrDie(loopbackOptions());
   ASSERT_NE(server, nullptr);
   HealthCheckResponse response;
   const grpc::Status status = checkHealth(server->address(), kObjectDatabaseServiceName, &response);
   ASSERT_TRUE(status.ok()) << status.error_message();
-  EXPECT_EQ(response.status(), HealthCheckResponse::NOT_SERVING);
+  EXPECT_EQ(response.status(), HealthCheckResponse::SERVING);
 }
 
 TEST(ObjdbServer, HealthOfAnUnknownServiceIsNotFound) {
@@ -92,81 +91,6 @@ TEST(ObjdbServer, HealthOfAnUnknownServiceIsNotFound) {
   HealthCheckResponse response;
   const grpc::Status status = checkHealth(server->address(), "no.such.Service", &response);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND) << status.error_message();
-}
-
-// The ObjectDatabase RPCs come with their issues; until then every one of them must answer
-// UNIMPLEMENTED naming itself and what it waits for, never fake data.
-void expectPending(const grpc::Status& status, const std::string& method) {
-  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNIMPLEMENTED) << method;
-  EXPECT_EQ(status.error_message(), pendingRpcMessage(method));
-  EXPECT_NE(status.error_message().find("objdb.v1.ObjectDatabase/" + method +
-                                        " is not implemented yet; it waits for "),
-            std::string::npos)
-      << status.error_message();
-}
-
-TEST(ObjdbServer, ObjectDatabaseRpcsAreUnimplementedUntilTheirIssuesLand) {
-  auto server = startOrDie(loopbackOptions());
-  ASSERT_NE(server, nullptr);
-  auto stub = v1::ObjectDatabase::NewStub(channelTo(server->address()));
-
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    v1::GetStatsResponse response;
-    expectPending(stub->GetStats(&context, v1::GetStatsRequest(), &response), "GetStats");
-  }
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    v1::ListObjectsResponse response;
-    expectPending(stub->ListObjects(&context, v1::ListObjectsRequest(), &response), "ListObjects");
-  }
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    v1::ListSessionsResponse response;
-    expectPending(stub->ListSessions(&context, v1::ListSessionsRequest(), &response),
-                  "ListSessions");
-  }
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    v1::GetObjectRequest request;
-    request.set_id(1);
-    v1::ObjectDetail response;
-    expectPending(stub->GetObject(&context, request, &response), "GetObject");
-  }
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    v1::EndSessionRequest request;
-    request.set_session_name("s");
-    v1::EndSessionResponse response;
-    expectPending(stub->EndSession(&context, request, &response), "EndSession");
-  }
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    v1::GetSceneMeshRequest request;
-    request.set_session_name("s");
-    auto reader = stub->GetSceneMesh(&context, request);
-    v1::MeshChunk chunk;
-    EXPECT_FALSE(reader->Read(&chunk));
-    expectPending(reader->Finish(), "GetSceneMesh");
-  }
-  {
-    grpc::ClientContext context;
-    setDeadline(&context);
-    auto stream = stub->Ingest(&context);
-    v1::IngestRequest request;
-    request.mutable_header()->set_session_name("s");
-    stream->Write(request);  // may fail once the server has answered; the status tells why
-    stream->WritesDone();
-    v1::IngestResponse response;
-    EXPECT_FALSE(stream->Read(&response));
-    expectPending(stream->Finish(), "Ingest");
-  }
 }
 
 TEST(ObjdbServer, ShutdownStopsServingAndNewCallsFail) {

@@ -1,0 +1,1063 @@
+#include "server/object_database_service.h"
+
+#include <algorithm>
+#include <condition_variable>
+#include <deque>
+#include <filesystem>
+#include <future>
+#include <optional>
+#include <set>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/str_format.h"
+#include "core/common/logging.h"
+#include "core/common/params_io.h"
+#include "core/completion/scene_completion.h"
+#include "core/database/object_database.h"
+#include "core/gsm/gsm.h"
+#include "core/segmentation/depth_segmenter.h"
+#include "core/tsdf/mesh_extraction.h"
+#include "server/job_queue.h"
+#include "server/proto_convert.h"
+#include "server/status_convert.h"
+#include "storage/model_settings.h"
+
+namespace objdb::server {
+
+namespace {
+
+constexpr uint32_t kDefaultPageSize = 100;
+constexpr uint32_t kMaxPageSize = 1000;
+constexpr size_t kMaxSessionName = 128;
+constexpr size_t kMaxClientInfo = 256;
+
+double nowUnixSeconds() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+grpc::ServerUnaryReactor* finishUnary(grpc::CallbackServerContext* context, const Status& status) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  reactor->Finish(toGrpcStatus(status));
+  return reactor;
+}
+
+Status checkSessionName(const std::string& name) {
+  if (name.empty() || name.size() > kMaxSessionName) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "header.session_name has %d characters; it must have 1..%d", name.size(), kMaxSessionName));
+  }
+  for (unsigned char c : name) {
+    if (!(std::isalnum(c) || c == '.' || c == '_' || c == '-')) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "header.session_name \"%s\" holds '%c'; use only A-Z a-z 0-9 . _ -", name, c));
+    }
+  }
+  return absl::OkStatus();
+}
+
+// Sections a session may override: they shape its own map. The rest describes the shared
+// object database and is the server's (--config).
+bool perSessionSection(const std::string& section) {
+  return section == "segmentation" || section == "tsdf" || section == "gsm";
+}
+
+// Page tokens: "<kind>.<last id>.<filter hash>", opaque to clients.
+std::string pageToken(char kind, int64_t last_id, uint64_t filter) {
+  return absl::StrFormat("%c.%d.%x", kind, last_id, filter);
+}
+
+StatusOr<int64_t> parsePageToken(const std::string& token, char kind, uint64_t filter) {
+  if (token.empty()) return int64_t{0};
+  const std::vector<std::string> parts = absl::StrSplit(token, '.');
+  int64_t last = 0;
+  uint64_t hash = 0;
+  if (parts.size() != 3 || parts[0].size() != 1 || parts[0][0] != kind ||
+      !absl::SimpleAtoi(parts[1], &last) || last < 0 || !absl::SimpleHexAtoi(parts[2], &hash)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "page_token \"%s\" is not a token this call returned; start with an empty token", token));
+  }
+  if (hash != filter) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "page_token \"%s\" belongs to a listing with another filter; start again with an empty "
+        "token",
+        token));
+  }
+  return last;
+}
+
+uint32_t pageSize(uint32_t requested) {
+  return requested == 0 ? kDefaultPageSize : std::min(requested, kMaxPageSize);
+}
+
+int64_t fileBytes(const std::string& path) {
+  int64_t total = 0;
+  for (const char* suffix : {"", "-wal", "-shm"}) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path + suffix, ec);
+    if (!ec) total += int64_t(size);
+  }
+  return total;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Sessions and streams
+// ---------------------------------------------------------------------------------------------
+
+// One session with a map in memory: from its header until EndSession.
+struct LiveSession {
+  std::string name;
+  Intrinsics intrinsics;
+  Params params;
+  std::string client_info;
+  double started_unix_s = 0.0;
+
+  // Used by one thread at a time: the stream's frame worker, then (after it) the database thread.
+  std::optional<segmentation::DepthSegmenter> segmenter;
+  std::optional<gsm::Gsm> map;
+  std::vector<uint64_t> frame_indices;  // client index of each integrated frame (GSM frame order)
+  bool has_frame = false;
+  uint64_t last_index = 0;
+  double last_timestamp = 0.0;
+
+  std::mutex mutex;  // guards what follows
+  v1::SessionState state = v1::SESSION_STATE_OPEN;
+  bool streaming = true;  // its Ingest stream (frame worker) is still running
+  bool ending = false;    // EndSession queued its flush
+  double ended_unix_s = 0.0;
+  v1::SessionCounters counters;
+
+  v1::SessionCounters snapshot() {
+    std::lock_guard lock(mutex);
+    return counters;
+  }
+};
+
+// A raw segment waiting for the database, with why it was extracted.
+struct RawSegmentJob {
+  gsm::RawSegment segment;
+  v1::SegmentExtracted::Reason reason = v1::SegmentExtracted::IDLE;
+  uint64_t last_frame_index = 0;  // client index of the last frame that observed it
+};
+
+// The jobs for segments extracted from `session`'s map (on the thread that owns the map).
+std::vector<RawSegmentJob> jobsOf(const LiveSession& session, std::vector<gsm::RawSegment> segments,
+                                  v1::SegmentExtracted::Reason reason);
+
+class IngestReactor;
+
+// What the reactor (gRPC threads) and the frame worker share. Reactor calls happen under the
+// mutex and only while `reactor` is set (OnDone clears it).
+struct IngestStream {
+  std::recursive_mutex mutex;
+  std::condition_variable_any changed;
+  IngestReactor* reactor = nullptr;
+  std::shared_ptr<LiveSession> session;
+  std::deque<v1::Frame> inbox;
+  bool reads_paused = false;
+  bool input_ended = false;  // the client half-closed
+  bool cancelled = false;    // cancelled, or ended by an error: stop working
+  bool finished = false;     // Finish was called (or is pending behind writes)
+  std::deque<v1::IngestResponse> outbox;
+  bool writing = false;
+  std::optional<grpc::Status> finish_pending;
+
+  void send(v1::IngestResponse response);
+  void finish(const grpc::Status& status);
+  void resumeReading();
+};
+
+class IngestReactor final : public grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse> {
+ public:
+  IngestReactor(ObjectDatabaseService* service, grpc::CallbackServerContext* context)
+      : service_(service), context_(context), stream_(std::make_shared<IngestStream>()) {
+    stream_->reactor = this;
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    std::lock_guard lock(stream_->mutex);
+    if (stream_->finished || stream_->cancelled) return;
+    if (!ok) {
+      if (!stream_->session) {
+        stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                     "the stream ended before its SessionHeader"));
+      } else if (context_->IsCancelled()) {
+        stream_->cancelled = true;
+      } else {
+        stream_->input_ended = true;
+      }
+      stream_->changed.notify_all();
+      return;
+    }
+    if (!stream_->session) {
+      if (!request_.has_header()) {
+        stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                     "the first message of an Ingest stream must be a "
+                                     "SessionHeader; a frame came first"));
+        return;
+      }
+      auto session = service_->openSession(request_.header());
+      if (!session.ok()) {
+        stream_->finish(toGrpcStatus(session.status()));
+        return;
+      }
+      stream_->session = *session;
+      service_->startWorker([service = service_, stream = stream_] { service->runStream(stream); });
+      StartRead(&request_);
+      return;
+    }
+    if (request_.has_header()) {
+      stream_->cancelled = true;
+      stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                   "a second SessionHeader on the stream of session " +
+                                       stream_->session->name + "; one stream is one session"));
+      stream_->changed.notify_all();
+      return;
+    }
+    stream_->inbox.push_back(std::move(*request_.mutable_frame()));
+    stream_->changed.notify_all();
+    if (stream_->inbox.size() < service_->options_.frame_queue) {
+      StartRead(&request_);
+    } else {
+      stream_->reads_paused = true;  // the worker resumes reading when it takes a frame
+    }
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::lock_guard lock(stream_->mutex);
+    stream_->outbox.pop_front();
+    if (!ok) {  // the client is gone
+      stream_->outbox.clear();
+      stream_->cancelled = true;
+      stream_->changed.notify_all();
+    }
+    if (!stream_->outbox.empty()) {
+      StartWrite(&stream_->outbox.front());
+      return;
+    }
+    stream_->writing = false;
+    if (stream_->finish_pending) {
+      Finish(*stream_->finish_pending);
+      stream_->finish_pending.reset();
+    }
+  }
+
+  void OnCancel() override {
+    std::lock_guard lock(stream_->mutex);
+    stream_->cancelled = true;
+    stream_->changed.notify_all();
+  }
+
+  void OnDone() override {
+    {
+      std::lock_guard lock(stream_->mutex);
+      stream_->reactor = nullptr;
+      stream_->cancelled = true;
+      stream_->changed.notify_all();
+    }
+    delete this;
+  }
+
+  void read() { StartRead(&request_); }
+
+ private:
+  ObjectDatabaseService* service_;
+  grpc::CallbackServerContext* context_;
+  std::shared_ptr<IngestStream> stream_;
+  v1::IngestRequest request_;
+};
+
+void IngestStream::send(v1::IngestResponse response) {
+  std::lock_guard lock(mutex);
+  if (reactor == nullptr || finished) return;
+  outbox.push_back(std::move(response));
+  if (!writing) {
+    writing = true;
+    reactor->StartWrite(&outbox.front());
+  }
+}
+
+void IngestStream::finish(const grpc::Status& status) {
+  std::lock_guard lock(mutex);
+  if (reactor == nullptr || finished) return;
+  finished = true;
+  if (writing) {
+    finish_pending = status;
+  } else {
+    reactor->Finish(status);
+  }
+}
+
+void IngestStream::resumeReading() {
+  std::lock_guard lock(mutex);
+  if (reactor == nullptr || finished || !reads_paused) return;
+  reads_paused = false;
+  reactor->read();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Service
+// ---------------------------------------------------------------------------------------------
+
+StatusOr<std::unique_ptr<ObjectDatabaseService>> ObjectDatabaseService::create(
+    const ServiceOptions& options, storage::SqliteStore* store) {
+  OBJDB_RETURN_IF_ERROR(options.params.validate());
+  OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<database::ObjectDatabase> db,
+                         database::ObjectDatabase::create(options.params, store));
+  // Sessions a stopped server left open lost their maps with it.
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> sessions, store->sessions());
+  for (const auto& s : sessions) {
+    if (s.state != storage::SessionState::kOpen) continue;
+    logger("server")->warn("session {} was still open when the server last stopped; its map is "
+                           "lost (segments inserted before stay): marking it interrupted",
+                           s.name);
+    OBJDB_RETURN_IF_ERROR(
+        store->finishSession(s.name, storage::SessionState::kInterrupted, s.frames));
+  }
+  return std::unique_ptr<ObjectDatabaseService>(
+      new ObjectDatabaseService(options, store, std::move(db)));
+}
+
+ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
+                                             storage::SqliteStore* store,
+                                             std::unique_ptr<database::ObjectDatabase> db)
+    : options_(options),
+      store_(store),
+      db_(std::move(db)),
+      database_queue_(std::make_unique<JobQueue>(options.segment_queue)) {}
+
+ObjectDatabaseService::~ObjectDatabaseService() { stop(); }
+
+void ObjectDatabaseService::stop() {
+  std::list<Worker> workers;
+  {
+    std::lock_guard lock(mutex_);
+    if (stopped_) return;
+    stopped_ = true;
+    workers.swap(workers_);
+  }
+  for (auto& w : workers) w.thread.join();
+  database_queue_.reset();  // runs what is queued, then stops
+  std::lock_guard lock(mutex_);
+  for (auto& [name, session] : sessions_) {
+    std::lock_guard session_lock(session->mutex);
+    if (session->state == v1::SESSION_STATE_ENDED) continue;
+    logger("server")->warn("session {} did not end before the server stopped; its map is lost "
+                           "(segments inserted so far stay)",
+                           name);
+    (void)store_->finishSession(name, storage::SessionState::kInterrupted,
+                                int64_t(session->counters.frames_integrated()));
+  }
+}
+
+void ObjectDatabaseService::startWorker(std::function<void()> work) {
+  std::lock_guard lock(mutex_);
+  // Join the workers that are done.
+  for (auto it = workers_.begin(); it != workers_.end();) {
+    if (it->finished->load()) {
+      it->thread.join();
+      it = workers_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  auto finished = std::make_shared<std::atomic<bool>>(false);
+  workers_.push_back({std::thread([work = std::move(work), finished] {
+                        work();
+                        finished->store(true);
+                      }),
+                      finished});
+}
+
+std::shared_ptr<LiveSession> ObjectDatabaseService::liveSession(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  const auto it = sessions_.find(name);
+  return it == sessions_.end() ? nullptr : it->second;
+}
+
+StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
+    const v1::SessionHeader& header) {
+  OBJDB_RETURN_IF_ERROR(checkSessionName(header.session_name()));
+  if (header.client_info().size() > kMaxClientInfo) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "header.client_info has %d characters; at most %d", header.client_info().size(),
+        kMaxClientInfo));
+  }
+  if (!header.has_intrinsics()) {
+    return absl::InvalidArgumentError("header.intrinsics is missing");
+  }
+  auto session = std::make_shared<LiveSession>();
+  session->name = header.session_name();
+  session->client_info = header.client_info();
+  OBJDB_ASSIGN_OR_RETURN(session->intrinsics, fromProto(header.intrinsics(), "header.intrinsics"));
+  session->params = options_.params;
+  if (!header.params_json().empty()) {
+    const nlohmann::json overrides = nlohmann::json::parse(header.params_json(), nullptr, false);
+    if (overrides.is_discarded() || !overrides.is_object()) {
+      return absl::InvalidArgumentError("header.params_json is not a JSON object");
+    }
+    for (const auto& [section, value] : overrides.items()) {
+      if (!perSessionSection(section)) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "header.params_json sets \"%s\", which describes the shared object database; only "
+            "\"segmentation\", \"tsdf\" and \"gsm\" may differ per session (set the rest in the "
+            "server's --config)",
+            section));
+      }
+    }
+    if (Status applied = applyParamsJson(header.params_json(), &session->params); !applied.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("header.params_json: ", applied.message()));
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+  // The models of this session must be described as the database's are (and as the server's).
+  storage::SessionInfo server_settings;
+  server_settings.name = "(the server's --config)";
+  server_settings.params_json = paramsToJson(options_.params);
+  for (const std::vector<storage::SessionInfo>& against : {stored, {server_settings}}) {
+    if (Status same = storage::checkModelSettings(against, session->params); !same.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("header.params_json: ", same.message()));
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      segmentation::DepthSegmenter segmenter,
+      segmentation::DepthSegmenter::create(session->params.segmentation, session->intrinsics));
+  session->segmenter.emplace(std::move(segmenter));
+  OBJDB_ASSIGN_OR_RETURN(gsm::Gsm map,
+                         gsm::Gsm::create(session->params.tsdf, session->params.gsm,
+                                          session->intrinsics, options_.integration_threads));
+  session->map.emplace(std::move(map));
+
+  std::lock_guard lock(mutex_);
+  if (stopped_) return absl::UnavailableError("the server is shutting down");
+  storage::SessionInfo info;
+  info.name = session->name;
+  info.intrinsics_json = intrinsicsToJson(session->intrinsics);
+  info.params_json = paramsToJson(session->params);
+  // ALREADY_EXISTS when the database has a session of that name.
+  OBJDB_RETURN_IF_ERROR(store_->beginSession(info).status());
+  session->started_unix_s = nowUnixSeconds();
+  sessions_[session->name] = session;
+  logger("server")->info("session {} opened ({}x{}, client \"{}\")", session->name,
+                         session->intrinsics.width, session->intrinsics.height,
+                         session->client_info);
+  return session;
+}
+
+void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
+  LiveSession& session = *stream->session;
+  bool ended_cleanly = false;
+  while (true) {
+    v1::Frame frame;
+    {
+      std::unique_lock lock(stream->mutex);
+      stream->changed.wait(lock, [&] {
+        return stream->cancelled || !stream->inbox.empty() || stream->input_ended;
+      });
+      if (stream->cancelled) break;
+      if (stream->inbox.empty()) {
+        ended_cleanly = true;
+        break;
+      }
+      frame = std::move(stream->inbox.front());
+      stream->inbox.pop_front();
+      stream->resumeReading();
+    }
+    processFrame(stream, frame);
+  }
+  if (ended_cleanly) {
+    // Every segment extracted so far through the database, then the summary.
+    std::promise<void> done;
+    database_queue_->push([&done] { done.set_value(); });
+    done.get_future().wait();
+    {
+      std::lock_guard lock(session.mutex);
+      session.streaming = false;
+    }
+    auto summary = summaryOf(session);
+    if (summary.ok()) {
+      v1::IngestResponse response;
+      *response.mutable_summary() = *std::move(summary);
+      stream->send(std::move(response));
+      stream->finish(grpc::Status::OK);
+    } else {
+      stream->finish(toGrpcStatus(summary.status()));
+    }
+    logger("server")->info("session {}: stream closed by the client; open until EndSession",
+                           session.name);
+    return;
+  }
+  {
+    std::lock_guard lock(session.mutex);
+    session.streaming = false;
+    session.state = v1::SESSION_STATE_INTERRUPTED;
+    session.ended_unix_s = nowUnixSeconds();
+  }
+  jobs_cancelled_.fetch_add(1);
+  (void)store_->finishSession(session.name, storage::SessionState::kInterrupted,
+                              int64_t(session.snapshot().frames_integrated()));
+  stream->finish(grpc::Status(grpc::StatusCode::CANCELLED, "the Ingest stream was interrupted"));
+  logger("server")->warn("session {}: stream interrupted; EndSession can still flush its map",
+                         session.name);
+}
+
+void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& stream_ptr,
+                                         const v1::Frame& frame) {
+  IngestStream& stream = *stream_ptr;
+  LiveSession& session = *stream.session;
+  v1::IngestResponse response;
+  v1::FrameAck& ack = *response.mutable_ack();
+  ack.set_index(frame.index());
+  {
+    std::lock_guard lock(session.mutex);
+    session.counters.set_frames_received(session.counters.frames_received() + 1);
+  }
+  auto reject = [&](const Status& status) {
+    ack.set_accepted(false);
+    ack.set_code(int32_t(status.code()));
+    ack.set_reason(std::string(status.message()));
+    std::lock_guard lock(session.mutex);
+    session.counters.set_frames_rejected(session.counters.frames_rejected() + 1);
+    *ack.mutable_session() = session.counters;
+  };
+  auto run = [&]() -> Status {
+    if (session.has_frame && frame.index() <= session.last_index) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "frame.index %d is not above the previous frame's %d", frame.index(), session.last_index));
+    }
+    if (!std::isfinite(frame.timestamp_s()) ||
+        (session.has_frame && frame.timestamp_s() <= session.last_timestamp)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "frame.timestamp_s %g is not finite or not above the previous frame's %g",
+          frame.timestamp_s(), session.last_timestamp));
+    }
+    if (!frame.has_t_world_camera()) {
+      return absl::InvalidArgumentError("frame.T_world_camera is missing");
+    }
+    OBJDB_ASSIGN_OR_RETURN(const Transform T_world_camera,
+                           fromProto(frame.t_world_camera(), "frame.T_world_camera"));
+    if (!frame.has_depth()) return absl::InvalidArgumentError("frame.depth is missing");
+    DepthCounts counts;
+    OBJDB_ASSIGN_OR_RETURN(const DepthImage depth,
+                           decodeDepth(frame.depth(), session.intrinsics, &counts));
+    std::optional<ColorImage> color;
+    if (frame.has_color()) {
+      OBJDB_ASSIGN_OR_RETURN(color, decodeColor(frame.color(), depth.width, depth.height));
+    }
+    const ColorImage* color_ptr = color ? &*color : nullptr;
+    OBJDB_ASSIGN_OR_RETURN(const segmentation::SegmentationResult segments,
+                           session.segmenter->segment(depth, color_ptr));
+    OBJDB_ASSIGN_OR_RETURN(const gsm::GsmFrameResult fused,
+                           session.map->integrate(depth, segments.labels, T_world_camera, color_ptr));
+    session.has_frame = true;
+    session.last_index = frame.index();
+    session.last_timestamp = frame.timestamp_s();
+    session.frame_indices.push_back(frame.index());
+    ack.set_accepted(true);
+    v1::FrameCounters& c = *ack.mutable_frame();
+    c.set_valid_pixels(uint32_t(fused.tsdf.points_used));
+    c.set_missing_pixels(counts.missing);
+    c.set_invalid_pixels(counts.invalid);
+    c.set_out_of_range_pixels(uint32_t(fused.tsdf.out_of_range));
+    c.set_segments(uint32_t(segments.segments.size()));
+    std::lock_guard lock(session.mutex);
+    session.counters.set_frames_integrated(session.counters.frames_integrated() + 1);
+    *ack.mutable_session() = session.counters;
+    return absl::OkStatus();
+  };
+  if (Status processed = run(); !processed.ok()) reject(processed);
+  stream.send(std::move(response));
+  if (!ack.accepted()) return;
+  std::vector<RawSegmentJob> jobs =
+      jobsOf(session, session.map->extractIdle(), v1::SegmentExtracted::IDLE);
+  if (!jobs.empty()) queueInserts(stream_ptr->session, stream_ptr, std::move(jobs), true);
+}
+
+std::vector<RawSegmentJob> jobsOf(const LiveSession& session, std::vector<gsm::RawSegment> segments,
+                                  v1::SegmentExtracted::Reason reason) {
+  std::vector<RawSegmentJob> jobs;
+  for (auto& segment : segments) {
+    const size_t frame = size_t(std::max<int64_t>(segment.last_update_frame, 0));
+    const uint64_t index =
+        frame < session.frame_indices.size() ? session.frame_indices[frame] : session.last_index;
+    jobs.push_back({std::move(segment), reason, index});
+  }
+  return jobs;
+}
+
+void ObjectDatabaseService::queueInserts(const std::shared_ptr<LiveSession>& session,
+                                         const std::shared_ptr<IngestStream>& stream,
+                                         std::vector<RawSegmentJob> jobs, bool may_wait) {
+  for (auto& job : jobs) {
+    auto shared = std::make_shared<RawSegmentJob>(std::move(job));
+    auto work = [this, session, stream, shared] { (void)insert(*session, stream.get(), *shared); };
+    if (may_wait) {
+      database_queue_->pushWaiting(std::move(work));
+    } else {
+      database_queue_->push(std::move(work));
+    }
+  }
+}
+
+Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
+                                     RawSegmentJob& job) {
+  const gsm::RawSegment& segment = job.segment;
+  auto report = db_->insertSegment(session.name, segment);
+  if (!report.ok()) {
+    if (absl::IsFailedPrecondition(report.status()) || absl::IsInvalidArgument(report.status())) {
+      // A segment the database cannot take (no surface at the mesh weight): skipped.
+      logger("server")->debug("session {}: segment {} skipped: {}", session.name, segment.label,
+                              std::string(report.status().message()));
+      return absl::OkStatus();
+    }
+    const Status failed = annotate(
+        report.status(), absl::StrFormat("inserting segment %d of session %s into the database",
+                                         segment.label, session.name));
+    logger("server")->error("{}", std::string(failed.message()));
+    if (stream != nullptr) {
+      std::lock_guard lock(stream->mutex);
+      stream->cancelled = true;
+      stream->changed.notify_all();
+      stream->finish(toGrpcStatus(failed));
+    }
+    return failed;
+  }
+  candidates_skipped_.fetch_add(report->unreadable_candidates);
+  const auto segment_id = store_->rawSegmentId({session.name, segment.label});
+  {
+    std::lock_guard lock(session.mutex);
+    v1::SessionCounters& c = session.counters;
+    c.set_segments_extracted(c.segments_extracted() + 1);
+    if (report->merged) {
+      c.set_objects_merged(c.objects_merged() + 1);
+    } else if (!report->replaced_earlier) {
+      c.set_objects_created(c.objects_created() + 1);
+    }
+  }
+  if (stream == nullptr) return absl::OkStatus();
+  v1::IngestResponse extracted;
+  v1::SegmentExtracted& e = *extracted.mutable_segment();
+  e.set_segment_id(segment_id.ok() ? uint64_t(*segment_id) : 0);
+  e.set_gsm_label(segment.label);
+  e.set_reason(job.reason);
+  e.set_last_frame_index(job.last_frame_index);
+  e.set_num_voxels(uint32_t(segment.label_voxels.size()));
+  *e.mutable_t_world_segment() = toProto(segment.T_world_segment);
+  if (!segment.label_voxels.empty()) {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::max());
+    Eigen::Vector3d hi = -lo;
+    for (const auto& v : segment.label_voxels) {
+      const Eigen::Vector3d p =
+          segment.T_world_segment * segment.grid.voxelCenter(v).cast<double>();
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+    const Eigen::Vector3d half = Eigen::Vector3d::Constant(0.5 * segment.grid.voxelSize());
+    setVector(lo - half, e.mutable_bounds_world()->mutable_min());
+    setVector(hi + half, e.mutable_bounds_world()->mutable_max());
+  }
+  stream->send(std::move(extracted));
+  v1::IngestResponse event;
+  v1::ObjectEvent& o = *event.mutable_object();
+  o.set_segment_id(e.segment_id());
+  if (report->merged) {
+    o.set_kind(v1::ObjectEvent::MERGED);
+    o.set_into_object_id(uint64_t(report->model_id));
+    for (const auto& r : report->results) {
+      if (!r.accepted || r.model_id != report->model_id) continue;
+      v1::MergeEvidence& ev = *o.mutable_evidence();
+      ev.set_icp_rmse_m(r.registration.icp_rmse);
+      ev.set_tsdf_rmse_m(r.model_verdict.agreement.rmse);
+      ev.set_overlap_voxels(r.model_verdict.agreement.overlap);
+      ev.set_non_overlap_voxels(r.model_verdict.agreement.compared -
+                                r.model_verdict.agreement.overlap);
+      *ev.mutable_t_into_merged() = toProto(r.registration.T_target_source);
+      break;
+    }
+  } else {
+    o.set_kind(v1::ObjectEvent::CREATED);
+    o.set_object_id(uint64_t(report->model_id));
+  }
+  stream->send(std::move(event));
+  return absl::OkStatus();
+}
+
+Status ObjectDatabaseService::flush(LiveSession& session) {
+  std::vector<RawSegmentJob> jobs =
+      jobsOf(session, session.map->extractIdle(true), v1::SegmentExtracted::SESSION_END);
+  for (auto& job : jobs) OBJDB_RETURN_IF_ERROR(insert(session, nullptr, job));
+  OBJDB_RETURN_IF_ERROR(store_->putScene(
+      session.name, std::make_shared<const tsdf::TsdfLayer>(session.map->tsdf().clone()),
+      std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks())));
+  const int64_t frames = int64_t(session.snapshot().frames_integrated());
+  OBJDB_RETURN_IF_ERROR(store_->finishSession(session.name, storage::SessionState::kEnded, frames));
+  {
+    std::lock_guard lock(session.mutex);
+    session.state = v1::SESSION_STATE_ENDED;
+    session.ended_unix_s = nowUnixSeconds();
+  }
+  // The map is stored; free its memory.
+  session.map.reset();
+  session.segmenter.reset();
+  logger("server")->info("session {} ended: {} frames, {} segments flushed at the end",
+                         session.name, frames, jobs.size());
+  return absl::OkStatus();
+}
+
+StatusOr<std::vector<uint64_t>> ObjectDatabaseService::objectsOf(const std::string& session) {
+  std::vector<uint64_t> ids;
+  storage::ModelQuery query;
+  query.session = session;
+  query.limit = kMaxPageSize;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::ModelSummary> page,
+                           store_->modelSummaries(query));
+    for (const auto& m : page) ids.push_back(uint64_t(m.id));
+    if (page.size() < query.limit) break;
+    query.after_id = page.back().id;
+  }
+  return ids;
+}
+
+StatusOr<v1::SessionSummary> ObjectDatabaseService::summaryOf(LiveSession& session) {
+  v1::SessionSummary summary;
+  summary.set_session_name(session.name);
+  {
+    std::lock_guard lock(session.mutex);
+    summary.set_state(session.state);
+    *summary.mutable_counters() = session.counters;
+  }
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<uint64_t> ids, objectsOf(session.name));
+  for (uint64_t id : ids) summary.add_object_ids(id);
+  return summary;
+}
+
+grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* ObjectDatabaseService::Ingest(
+    grpc::CallbackServerContext* context) {
+  return new IngestReactor(this, context);
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServerContext* context,
+                                                            const v1::EndSessionRequest* request,
+                                                            v1::EndSessionResponse* response) {
+  const std::string& name = request->session_name();
+  std::shared_ptr<LiveSession> session = liveSession(name);
+  if (!session) {
+    auto stored = store_->sessions();
+    if (!stored.ok()) return finishUnary(context, stored.status());
+    for (const auto& s : *stored) {
+      if (s.name != name) continue;
+      if (s.state != storage::SessionState::kEnded) {
+        return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
+                                        "session %s was not ended before the server stopped; "
+                                        "its map was not kept (the segments inserted before are "
+                                        "in the database), so it cannot be flushed any more",
+                                        name)));
+      }
+      v1::SessionSummary& summary = *response->mutable_summary();
+      summary.set_session_name(name);
+      summary.set_state(v1::SESSION_STATE_ENDED);
+      summary.mutable_counters()->set_frames_integrated(uint64_t(s.frames));
+      auto ids = objectsOf(name);
+      if (!ids.ok()) return finishUnary(context, ids.status());
+      for (uint64_t id : *ids) summary.add_object_ids(id);
+      return finishUnary(context, absl::OkStatus());
+    }
+    return finishUnary(context,
+                       absl::NotFoundError(absl::StrFormat("no session named \"%s\"", name)));
+  }
+  {
+    std::lock_guard lock(session->mutex);
+    if (session->streaming) {
+      return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
+                                      "session %s still has its Ingest stream open; half-close "
+                                      "it (WritesDone) and read it to the end first",
+                                      name)));
+    }
+  }
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  // On the database thread, after every segment queued before it: flush once, then answer. A
+  // second call queued behind the flush answers with the ended session's summary.
+  database_queue_->push([this, session, reactor, response] {
+    Status status = absl::OkStatus();
+    bool ended = false;
+    {
+      std::lock_guard lock(session->mutex);
+      ended = session->state == v1::SESSION_STATE_ENDED;
+    }
+    if (!ended) status = flush(*session);
+    if (status.ok()) {
+      auto summary = summaryOf(*session);
+      if (summary.ok()) {
+        *response->mutable_summary() = *std::move(summary);
+      } else {
+        status = summary.status();
+      }
+    }
+    reactor->Finish(toGrpcStatus(status));
+  });
+  return reactor;
+}
+
+void ObjectDatabaseService::describe(const storage::SessionInfo& stored, v1::SessionInfo* out) {
+  out->set_session_name(stored.name);
+  out->set_state(toProto(stored.state));
+  out->set_started_unix_s(unixSeconds(stored.started_at));
+  out->set_ended_unix_s(unixSeconds(stored.ended_at));
+  *out->mutable_intrinsics() = intrinsicsFromJson(stored.intrinsics_json);
+  out->mutable_counters()->set_frames_integrated(uint64_t(stored.frames));
+  // A session this server runs: its live state and counters.
+  if (std::shared_ptr<LiveSession> live = liveSession(stored.name)) {
+    std::lock_guard lock(live->mutex);
+    out->set_state(live->state);
+    out->set_client_info(live->client_info);
+    out->set_started_unix_s(live->started_unix_s);
+    out->set_ended_unix_s(live->ended_unix_s);
+    *out->mutable_counters() = live->counters;
+  }
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::ListSessions(
+    grpc::CallbackServerContext* context, const v1::ListSessionsRequest* request,
+    v1::ListSessionsResponse* response) {
+  auto after = parsePageToken(request->page_token(), 's', 0);
+  if (!after.ok()) return finishUnary(context, after.status());
+  auto stored = store_->sessions();
+  if (!stored.ok()) return finishUnary(context, stored.status());
+  const uint32_t limit = pageSize(request->page_size());
+  int64_t last = *after;
+  for (const auto& s : *stored) {
+    if (s.id <= *after) continue;
+    if (response->sessions_size() == int(limit)) {
+      response->set_next_page_token(pageToken('s', last, 0));
+      break;
+    }
+    describe(s, response->add_sessions());
+    last = s.id;
+  }
+  return finishUnary(context, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServerContext* context,
+                                                             const v1::ListObjectsRequest* request,
+                                                             v1::ListObjectsResponse* response) {
+  const uint64_t filter = std::hash<std::string>()(request->session_name()) * 2 +
+                          (request->include_merged() ? 1 : 0);
+  auto after = parsePageToken(request->page_token(), 'o', filter);
+  if (!after.ok()) return finishUnary(context, after.status());
+  if (!request->session_name().empty()) {
+    auto stored = store_->sessions();
+    if (!stored.ok()) return finishUnary(context, stored.status());
+    const bool known = std::any_of(stored->begin(), stored->end(), [&](const auto& s) {
+      return s.name == request->session_name();
+    });
+    if (!known) {
+      return finishUnary(context, absl::NotFoundError(absl::StrFormat(
+                                      "no session named \"%s\"", request->session_name())));
+    }
+  }
+  storage::ModelQuery query;
+  query.after_id = *after;
+  query.limit = pageSize(request->page_size()) + 1;  // one more: is there a next page?
+  query.session = request->session_name();
+  query.include_merged = request->include_merged();
+  auto models = store_->modelSummaries(query);
+  if (!models.ok()) return finishUnary(context, models.status());
+  const bool more = models->size() == query.limit;
+  if (more) models->pop_back();
+  for (const auto& m : *models) toProto(m, response->add_objects());
+  if (more) response->set_next_page_token(pageToken('o', models->back().id, filter));
+  return finishUnary(context, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerContext* context,
+                                                           const v1::GetObjectRequest* request,
+                                                           v1::ObjectDetail* response) {
+  auto run = [&]() -> Status {
+    const int64_t id = int64_t(request->id());
+    storage::ModelQuery query;
+    query.after_id = id - 1;
+    query.limit = 1;
+    query.include_merged = true;
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::ModelSummary> found,
+                           store_->modelSummaries(query));
+    if (request->id() == 0 || request->id() > uint64_t(INT64_MAX) || found.empty() ||
+        found.front().id != id) {
+      return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
+    }
+    const storage::ModelSummary& summary = found.front();
+    toProto(summary, response->mutable_summary());
+    v1::ObjectStats& stats = *response->mutable_stats();
+    std::set<uint64_t> segments;
+    for (const auto& o : summary.observations) {
+      v1::ObjectPose& pose = *response->add_poses();
+      pose.set_session_name(o.session);
+      *pose.mutable_t_world_object() = toProto(o.T_world_object);
+      pose.set_segment_id(uint64_t(o.raw_segment_id));
+      if (o.raw_segment_id > 0) segments.insert(uint64_t(o.raw_segment_id));
+    }
+    for (uint64_t s : segments) stats.add_segment_ids(s);
+    stats.set_num_points(uint32_t(summary.num_points));
+    stats.set_num_keypoints(uint32_t(summary.num_keypoints));
+    stats.set_voxel_size_m(summary.voxel_size);
+    stats.set_num_merges(uint32_t(summary.merges));
+    if (summary.state != "active") return absl::OkStatus();  // merged: its geometry moved on
+    OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const model::ObjectModel> model, store_->model(id));
+    const size_t per_block = size_t(std::pow(model->grid.voxelsPerSide(), 3));
+    stats.set_num_voxels(uint32_t(model->grid.numBlocks() * per_block));
+    if (request->include_mesh()) {
+      toProto(tsdf::extractMesh(model->grid, options_.params.tsdf.mesh_min_weight),
+              response->mutable_mesh());
+    }
+    if (request->include_cloud()) toProto(model->cloud, response->mutable_cloud());
+    const size_t bytes = response->ByteSizeLong();
+    if (bytes > options_.max_send_message_bytes) {
+      return absl::ResourceExhaustedError(absl::StrFormat(
+          "object %d with its %s is %d bytes, above the server's message limit of %d bytes; ask "
+          "for less (include_mesh / include_cloud)",
+          id, request->include_mesh() ? "mesh" : "cloud", bytes, options_.max_send_message_bytes));
+    }
+    return absl::OkStatus();
+  };
+  const Status status = run();
+  if (!status.ok()) response->Clear();
+  return finishUnary(context, status);
+}
+
+// Streams a session's mesh in chunks; the mesh is made on a worker thread.
+class SceneMeshReactor final : public grpc::ServerWriteReactor<v1::MeshChunk> {
+ public:
+  void start(std::vector<TriangleMesh> chunks) {
+    std::lock_guard lock(mutex_);
+    chunks_ = std::move(chunks);
+    writeNext();
+  }
+  void fail(const Status& status) {
+    std::lock_guard lock(mutex_);
+    Finish(toGrpcStatus(status));
+  }
+  void OnWriteDone(bool ok) override {
+    std::lock_guard lock(mutex_);
+    if (!ok) {
+      Finish(grpc::Status(grpc::StatusCode::CANCELLED, "the client stopped reading"));
+      return;
+    }
+    writeNext();
+  }
+  void OnDone() override { delete this; }
+
+ private:
+  void writeNext() {
+    if (next_ >= chunks_.size()) {
+      Finish(grpc::Status::OK);
+      return;
+    }
+    chunk_.Clear();
+    chunk_.set_chunk_index(uint32_t(next_));
+    chunk_.set_last(next_ + 1 == chunks_.size());
+    toProto(chunks_[next_], chunk_.mutable_mesh());
+    chunks_[next_] = TriangleMesh();
+    ++next_;
+    StartWrite(&chunk_);
+  }
+  std::mutex mutex_;
+  std::vector<TriangleMesh> chunks_;
+  size_t next_ = 0;
+  v1::MeshChunk chunk_;
+};
+
+grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
+    grpc::CallbackServerContext* context, const v1::GetSceneMeshRequest* request) {
+  auto* reactor = new SceneMeshReactor();
+  const std::string name = request->session_name();
+  const bool completed = request->completed();
+  startWorker([this, reactor, name, completed, context] {
+    auto run = [&]() -> StatusOr<std::vector<TriangleMesh>> {
+      OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+      const auto it = std::find_if(stored.begin(), stored.end(),
+                                   [&](const auto& s) { return s.name == name; });
+      if (it == stored.end()) {
+        return absl::NotFoundError(absl::StrFormat("no session named \"%s\"", name));
+      }
+      OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const tsdf::TsdfLayer> scene,
+                             store_->scene(name));
+      if (!scene) {
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "session %s has no stored map yet (state %s): EndSession stores it", name,
+            storage::sessionStateName(it->state)));
+      }
+      // The session's own parameters decide its mesh; the server's its completion.
+      Params params = options_.params;
+      if (Status applied = applyParamsJson(it->params_json, &params); !applied.ok()) {
+        params = options_.params;
+      }
+      TriangleMesh mesh;
+      if (completed) {
+        OBJDB_ASSIGN_OR_RETURN(const tsdf::TsdfLayer full,
+                               completion::completeScene(*store_, name, options_.params.merging,
+                                                         params.tsdf.max_weight, nullptr));
+        if (context->IsCancelled()) return absl::CancelledError("GetSceneMesh was cancelled");
+        mesh = tsdf::extractMesh(full, params.tsdf.mesh_min_weight);
+      } else {
+        mesh = tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight);
+      }
+      return splitMesh(mesh, options_.mesh_chunk_bytes);
+    };
+    auto chunks = run();
+    if (!chunks.ok()) {
+      if (absl::IsCancelled(chunks.status())) jobs_cancelled_.fetch_add(1);
+      reactor->fail(chunks.status());
+      return;
+    }
+    if (chunks->empty()) chunks->emplace_back();  // one (empty, last) chunk: the mesh is empty
+    reactor->start(*std::move(chunks));
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerContext* context,
+                                                          const v1::GetStatsRequest*,
+                                                          v1::GetStatsResponse* response) {
+  auto run = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+    OBJDB_ASSIGN_OR_RETURN(const storage::StoreStats stats, store_->stats());
+    response->set_server_version(options_.version);
+    response->set_uptime_s(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count());
+    response->set_sessions_total(stored.size());
+    uint64_t frames = 0;
+    uint32_t open = 0;
+    for (const auto& s : stored) {
+      std::shared_ptr<LiveSession> live = liveSession(s.name);
+      if (!live) {
+        frames += uint64_t(s.frames);
+        continue;
+      }
+      std::lock_guard lock(live->mutex);
+      frames += live->counters.frames_integrated();
+      open += live->streaming ? 1 : 0;
+    }
+    response->set_sessions_open(open);
+    response->set_frames_integrated(frames);
+    response->set_objects_active(uint64_t(stats.active_models));
+    response->set_objects_merged(uint64_t(stats.merged_models));
+    for (const auto& t : stats.tables) {
+      if (t.table == "raw_segments") response->set_segments_total(uint64_t(t.rows));
+    }
+    response->set_database_size_bytes(uint64_t(fileBytes(store_->path())));
+    response->set_queued_segments(uint32_t(database_queue_->pending()));
+    response->set_jobs_cancelled(jobs_cancelled_.load());
+    response->set_candidates_skipped(candidates_skipped_.load());
+    return absl::OkStatus();
+  };
+  return finishUnary(context, run());
+}
+
+}  // namespace objdb::server

@@ -1,0 +1,131 @@
+// objdb.v1.ObjectDatabase (DESIGN.md "Data flow", "Threads"): the server's session pipeline and
+// the queries over its database.
+//
+// - Ingest: one stream = one session. The header is checked (name, intrinsics, parameters; the
+//   database's model settings must stay the same) and the session stored as open; a frame worker
+//   thread per stream decodes and validates each frame, segments it, fuses it into the session's
+//   Global Segmentation Map and acks it; idle segments go to the database queue. At most
+//   `frame_queue` frames wait per stream: beyond that the server stops reading (the client's
+//   writes block) — backpressure.
+// - One database thread runs Algorithm 1 for every extracted segment, in extraction order, and
+//   sends the SegmentExtracted and ObjectEvent messages back on the stream.
+// - EndSession flushes the map (every live label), inserts the rest, stores the scene map and
+//   ends the session, on the database thread.
+// - The queries read the SQLite file through its reader connections.
+// - A session's map lives in memory from its header to EndSession: a server stopped before
+//   EndSession loses the map of that session (its segments inserted so far stay), and the
+//   session is stored as interrupted.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <list>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "core/common/params.h"
+#include "core/common/status.h"
+#include "objdb/v1/objdb.grpc.pb.h"
+#include "storage/sqlite_store.h"
+
+namespace objdb::database {
+class ObjectDatabase;
+}
+
+namespace objdb::server {
+
+class JobQueue;
+struct LiveSession;
+struct IngestStream;
+struct RawSegmentJob;
+
+struct ServiceOptions {
+  Params params;                    // the server's parameters; sessions may override some
+  size_t frame_queue = 8;           // frames buffered per stream before reading pauses
+  size_t segment_queue = 64;        // segments waiting for the database before frame work waits
+  int integration_threads = 2;      // TSDF integration threads per session
+  size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size
+  size_t max_send_message_bytes = 16 << 20;    // GetObject larger than this: RESOURCE_EXHAUSTED
+  std::string version = "0.1.0";
+};
+
+class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
+ public:
+  // Loads the database's prefilter entries (the store outlives the service). Errors: the
+  // parameters, or a store that cannot be read.
+  static StatusOr<std::unique_ptr<ObjectDatabaseService>> create(const ServiceOptions& options,
+                                                                 storage::SqliteStore* store);
+  ~ObjectDatabaseService() override;  // stop()
+
+  // After the gRPC server stopped (no call in flight): waits for the workers, stores sessions
+  // that did not end as interrupted. Later calls return at once.
+  void stop();
+
+  grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* Ingest(
+      grpc::CallbackServerContext* context) override;
+  grpc::ServerUnaryReactor* EndSession(grpc::CallbackServerContext* context,
+                                       const v1::EndSessionRequest* request,
+                                       v1::EndSessionResponse* response) override;
+  grpc::ServerUnaryReactor* ListSessions(grpc::CallbackServerContext* context,
+                                         const v1::ListSessionsRequest* request,
+                                         v1::ListSessionsResponse* response) override;
+  grpc::ServerUnaryReactor* ListObjects(grpc::CallbackServerContext* context,
+                                        const v1::ListObjectsRequest* request,
+                                        v1::ListObjectsResponse* response) override;
+  grpc::ServerUnaryReactor* GetObject(grpc::CallbackServerContext* context,
+                                      const v1::GetObjectRequest* request,
+                                      v1::ObjectDetail* response) override;
+  grpc::ServerWriteReactor<v1::MeshChunk>* GetSceneMesh(
+      grpc::CallbackServerContext* context, const v1::GetSceneMeshRequest* request) override;
+  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context,
+                                     const v1::GetStatsRequest* request,
+                                     v1::GetStatsResponse* response) override;
+
+ private:
+  friend class IngestReactor;
+  friend class SceneMeshReactor;
+  ObjectDatabaseService(const ServiceOptions& options, storage::SqliteStore* store,
+                        std::unique_ptr<database::ObjectDatabase> db);
+
+  // Ingest.
+  StatusOr<std::shared_ptr<LiveSession>> openSession(const v1::SessionHeader& header);
+  void startWorker(std::function<void()> work);
+  void runStream(std::shared_ptr<IngestStream> stream);
+  void processFrame(const std::shared_ptr<IngestStream>& stream, const v1::Frame& frame);
+  // Queues the database insert of each segment (frame workers wait when the queue is full).
+  void queueInserts(const std::shared_ptr<LiveSession>& session,
+                    const std::shared_ptr<IngestStream>& stream, std::vector<RawSegmentJob> jobs,
+                    bool may_wait);
+  // Algorithm 1 for one segment (database thread); events go to `stream` when given. Errors:
+  // storage failures (a segment the database cannot take is skipped, OK).
+  Status insert(LiveSession& session, IngestStream* stream, RawSegmentJob& job);
+  // Runs on the database thread: extract everything, insert, store the scene, end the session.
+  Status flush(LiveSession& session);
+  StatusOr<v1::SessionSummary> summaryOf(LiveSession& session);
+  StatusOr<std::vector<uint64_t>> objectsOf(const std::string& session);
+  void describe(const storage::SessionInfo& stored, v1::SessionInfo* out);
+  std::shared_ptr<LiveSession> liveSession(const std::string& name);
+
+  const ServiceOptions options_;
+  storage::SqliteStore* store_;
+  std::unique_ptr<database::ObjectDatabase> db_;  // used on the database thread only
+  const std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
+
+  std::mutex mutex_;  // guards sessions_, workers_, stopped_
+  std::map<std::string, std::shared_ptr<LiveSession>> sessions_;
+  struct Worker {
+    std::thread thread;
+    std::shared_ptr<std::atomic<bool>> finished;
+  };
+  std::list<Worker> workers_;
+  bool stopped_ = false;
+
+  std::atomic<uint64_t> jobs_cancelled_{0};
+  std::atomic<uint64_t> candidates_skipped_{0};
+  std::unique_ptr<JobQueue> database_queue_;  // last: its thread stops first
+};
+
+}  // namespace objdb::server

@@ -1,0 +1,681 @@
+// objdb.v1.ObjectDatabase over loopback: a synthetic session streamed frame by frame must build
+// the same database as the offline pipeline, and be queryable (sessions, objects, meshes, stats)
+// across a restart; bad headers, bad frames, early EndSession, interrupted streams and bad page
+// tokens get the status codes the API promises.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/common/params.h"
+#include "core/database/object_database.h"
+#include "core/gsm/gsm.h"
+#include "core/segmentation/depth_segmenter.h"
+#include "core/sim/generator.h"
+#include "core/sim/lounge.h"
+#include "core/sim/renderer.h"
+#include "core/sim/scene.h"
+#include "objdb/v1/objdb.grpc.pb.h"
+#include "server/server.h"
+#include "tests/support/temp_dir.h"
+
+namespace objdb {
+namespace {
+
+constexpr auto kCallDeadline = std::chrono::seconds(120);
+constexpr double kMetresPerUnit = 0.001;
+
+std::string scratchDbPath() {
+  static testing::TempDir dir;
+  static int next = 0;
+  return (dir / ("service" + std::to_string(next++) + ".sqlite")).string();
+}
+
+ServerOptions loopbackOptions(const std::string& db_path = scratchDbPath()) {
+  ServerOptions options;
+  options.listen_address = "127.0.0.1:0";
+  options.db_path = db_path;
+  options.drain_deadline = std::chrono::seconds(30);
+  return options;
+}
+
+std::unique_ptr<ObjdbServer> startOrDie(const ServerOptions& options) {
+  StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
+  EXPECT_TRUE(server.ok()) << server.status();
+  return server.ok() ? *std::move(server) : nullptr;
+}
+
+// Receives up to the server's send limit (gRPC clients accept 4 MiB by default).
+std::unique_ptr<v1::ObjectDatabase::Stub> stubFor(const ObjdbServer& server) {
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(server.options().max_send_message_bytes);
+  return v1::ObjectDatabase::NewStub(grpc::CreateCustomChannel(
+      server.address(), grpc::InsecureChannelCredentials(), arguments));
+}
+
+void setDeadline(grpc::ClientContext* context) {
+  context->set_deadline(std::chrono::system_clock::now() + kCallDeadline);
+}
+
+// Two boxes on a floor seen by the Tango camera: depth in millimetres (as a sensor sends it) and
+// colour, rendered once.
+struct Recording {
+  Intrinsics intrinsics;
+  std::vector<RawDepthImage> depth;
+  std::vector<ColorImage> color;
+  std::vector<Transform> poses;
+};
+
+const Recording& twoBoxes() {
+  static const Recording recording = [] {
+    Recording r;
+    const sim::Scene scene = sim::twoBoxesScene("tango", 40);
+    auto built = sim::buildScene(scene);
+    auto poses = sim::sampleTrajectory(scene.trajectory);
+    EXPECT_TRUE(built.ok() && poses.ok());
+    const sim::Renderer renderer(scene.intrinsics);
+    r.intrinsics = scene.intrinsics;
+    for (size_t i = 0; i < poses->size(); ++i) {
+      const Frame frame = sim::renderFrame(scene, *built, renderer, (*poses)[i], i, true);
+      auto raw = depthToRaw(frame.depth, kMetresPerUnit);
+      EXPECT_TRUE(raw.ok());
+      r.depth.push_back(*raw);
+      r.color.push_back(*frame.color);
+      r.poses.push_back(frame.T_world_camera);
+    }
+    return r;
+  }();
+  return recording;
+}
+
+v1::Pose poseOf(const Transform& T) {
+  const TumPose p = tumPoseFromTransform(T, 0.0);
+  v1::Pose out;
+  out.set_x(p.t.x());
+  out.set_y(p.t.y());
+  out.set_z(p.t.z());
+  out.set_qx(p.q_xyzw[0]);
+  out.set_qy(p.q_xyzw[1]);
+  out.set_qz(p.q_xyzw[2]);
+  out.set_qw(p.q_xyzw[3]);
+  return out;
+}
+
+v1::IngestRequest header(const std::string& name, const Intrinsics& in,
+                         const std::string& params_json = "") {
+  v1::IngestRequest request;
+  v1::SessionHeader& h = *request.mutable_header();
+  h.set_session_name(name);
+  h.set_client_info("object_database_service_test");
+  h.set_params_json(params_json);
+  v1::Intrinsics& i = *h.mutable_intrinsics();
+  i.set_width(uint32_t(in.width));
+  i.set_height(uint32_t(in.height));
+  i.set_fx(in.fx);
+  i.set_fy(in.fy);
+  i.set_cx(in.cx);
+  i.set_cy(in.cy);
+  return request;
+}
+
+// Frame k of the recording; UINT16 depth (little-endian millimetres) and RGB8 colour.
+v1::IngestRequest frame(const Recording& r, size_t k) {
+  v1::IngestRequest request;
+  v1::Frame& f = *request.mutable_frame();
+  f.set_index(k);
+  f.set_timestamp_s(double(k) / 30.0);
+  *f.mutable_t_world_camera() = poseOf(r.poses[k]);
+  v1::DepthImage& d = *f.mutable_depth();
+  d.set_width(uint32_t(r.intrinsics.width));
+  d.set_height(uint32_t(r.intrinsics.height));
+  d.set_encoding(v1::DepthImage::UINT16);
+  d.set_metres_per_unit(kMetresPerUnit);
+  std::string bytes(r.depth[k].data.size() * 2, '\0');
+  for (size_t i = 0; i < r.depth[k].data.size(); ++i) {
+    bytes[2 * i] = char(r.depth[k].data[i] & 0xFF);
+    bytes[2 * i + 1] = char(r.depth[k].data[i] >> 8);
+  }
+  d.set_data(bytes);
+  v1::ColorImage& c = *f.mutable_color();
+  c.set_width(uint32_t(r.intrinsics.width));
+  c.set_height(uint32_t(r.intrinsics.height));
+  c.set_encoding(v1::ColorImage::RGB8);
+  c.set_data(std::string(reinterpret_cast<const char*>(r.color[k].data.data()),
+                         r.color[k].data.size() * 3));
+  return request;
+}
+
+struct IngestResult {
+  grpc::Status status;
+  std::vector<v1::IngestResponse> responses;
+  std::vector<v1::FrameAck> acks() const {
+    std::vector<v1::FrameAck> out;
+    for (const auto& r : responses) {
+      if (r.has_ack()) out.push_back(r.ack());
+    }
+    return out;
+  }
+  size_t count(v1::IngestResponse::EventCase kind) const {
+    size_t n = 0;
+    for (const auto& r : responses) n += r.event_case() == kind ? 1 : 0;
+    return n;
+  }
+};
+
+// Writes `requests`, half-closes, reads every response (on a second thread, so that the
+// server's backpressure cannot stall the writer) and returns the stream's status.
+IngestResult ingest(v1::ObjectDatabase::Stub& stub, const std::vector<v1::IngestRequest>& requests) {
+  grpc::ClientContext context;
+  setDeadline(&context);
+  auto stream = stub.Ingest(&context);
+  IngestResult result;
+  std::thread reader([&] {
+    v1::IngestResponse response;
+    while (stream->Read(&response)) result.responses.push_back(response);
+  });
+  for (const auto& r : requests) {
+    if (!stream->Write(r)) break;
+  }
+  stream->WritesDone();
+  reader.join();
+  result.status = stream->Finish();
+  return result;
+}
+
+std::vector<v1::IngestRequest> session(const std::string& name, size_t frames) {
+  const Recording& r = twoBoxes();
+  std::vector<v1::IngestRequest> requests = {header(name, r.intrinsics)};
+  for (size_t k = 0; k < frames; ++k) requests.push_back(frame(r, k));
+  return requests;
+}
+
+grpc::Status endSession(v1::ObjectDatabase::Stub& stub, const std::string& name,
+                        v1::EndSessionResponse* response) {
+  grpc::ClientContext context;
+  setDeadline(&context);
+  v1::EndSessionRequest request;
+  request.set_session_name(name);
+  return stub.EndSession(&context, request, response);
+}
+
+std::vector<v1::ObjectSummary> listObjects(v1::ObjectDatabase::Stub& stub,
+                                           const std::string& session = "",
+                                           uint32_t page_size = 0) {
+  std::vector<v1::ObjectSummary> out;
+  v1::ListObjectsRequest request;
+  request.set_session_name(session);
+  request.set_page_size(page_size);
+  while (true) {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::ListObjectsResponse response;
+    const grpc::Status status = stub.ListObjects(&context, request, &response);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    if (!status.ok()) break;
+    for (const auto& o : response.objects()) out.push_back(o);
+    if (response.next_page_token().empty()) break;
+    request.set_page_token(response.next_page_token());
+  }
+  return out;
+}
+
+// The offline pipeline on the same frames (as `objdb ingest` runs it): models in id order.
+std::vector<std::shared_ptr<const model::ObjectModel>> offlineModels(
+    const std::string& name, size_t frames, database::InMemoryModelStore* store) {
+  const Recording& r = twoBoxes();
+  const Params params;
+  auto segmenter = segmentation::DepthSegmenter::create(params.segmentation, r.intrinsics);
+  auto map = gsm::Gsm::create(params.tsdf, params.gsm, r.intrinsics, 2);
+  auto db = database::ObjectDatabase::create(params, store);
+  EXPECT_TRUE(segmenter.ok() && map.ok() && db.ok());
+  auto insert = [&](std::vector<gsm::RawSegment> segments) {
+    for (const auto& s : segments) (void)(*db)->insertSegment(name, s);
+  };
+  for (size_t k = 0; k < frames; ++k) {
+    auto depth = depthFromRaw(r.depth[k], kMetresPerUnit);
+    auto seg = segmenter->segment(*depth, &r.color[k]);
+    EXPECT_TRUE(seg.ok());
+    EXPECT_TRUE(map->integrate(*depth, seg->labels, r.poses[k], &r.color[k]).ok());
+    insert(map->extractIdle());
+  }
+  insert(map->extractIdle(true));
+  std::vector<std::shared_ptr<const model::ObjectModel>> models;
+  const auto ids = store->modelIds();
+  EXPECT_TRUE(ids.ok());
+  if (!ids.ok()) return models;
+  for (int64_t id : *ids) models.push_back(*store->model(id));
+  return models;
+}
+
+TEST(ObjectDatabaseService, AnEmptyDatabaseAnswersEveryQuery) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetStatsResponse stats;
+    ASSERT_TRUE(stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    EXPECT_FALSE(stats.server_version().empty());
+    EXPECT_EQ(stats.sessions_total(), 0u);
+    EXPECT_EQ(stats.objects_active(), 0u);
+    EXPECT_GT(stats.database_size_bytes(), 0u);
+  }
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::ListSessionsResponse sessions;
+    ASSERT_TRUE(stub->ListSessions(&context, v1::ListSessionsRequest(), &sessions).ok());
+    EXPECT_EQ(sessions.sessions_size(), 0);
+    EXPECT_TRUE(sessions.next_page_token().empty());
+  }
+  EXPECT_TRUE(listObjects(*stub).empty());
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetObjectRequest request;
+    request.set_id(1);
+    v1::ObjectDetail detail;
+    const grpc::Status status = stub->GetObject(&context, request, &detail);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(status.error_message(), "no object 1");
+  }
+  v1::EndSessionResponse ended;
+  const grpc::Status end = endSession(*stub, "nobody", &ended);
+  EXPECT_EQ(end.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_NE(end.error_message().find("nobody"), std::string::npos);
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetSceneMeshRequest request;
+    request.set_session_name("nobody");
+    auto reader = stub->GetSceneMesh(&context, request);
+    v1::MeshChunk chunk;
+    EXPECT_FALSE(reader->Read(&chunk));
+    EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
+  }
+}
+
+TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAndCanBeQueried) {
+  constexpr size_t kFrames = 40;
+  const std::string db_path = scratchDbPath();
+  auto server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+
+  const IngestResult streamed = ingest(*stub, session("monday", kFrames));
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  // One ack per frame, in order, all accepted, with their pixel counts.
+  const auto acks = streamed.acks();
+  ASSERT_EQ(acks.size(), kFrames);
+  for (size_t k = 0; k < kFrames; ++k) {
+    EXPECT_EQ(acks[k].index(), k);
+    EXPECT_TRUE(acks[k].accepted()) << acks[k].reason();
+    EXPECT_GT(acks[k].frame().valid_pixels(), 1000u);
+    EXPECT_GT(acks[k].frame().segments(), 0u);
+    EXPECT_EQ(acks[k].session().frames_integrated(), k + 1);
+  }
+  // The stream ends with the summary: the session stays open until EndSession.
+  ASSERT_TRUE(streamed.responses.back().has_summary());
+  EXPECT_EQ(streamed.responses.back().summary().state(), v1::SESSION_STATE_OPEN);
+  EXPECT_EQ(streamed.count(v1::IngestResponse::kSegment),
+            streamed.count(v1::IngestResponse::kObject));
+
+  v1::EndSessionResponse ended;
+  const grpc::Status end = endSession(*stub, "monday", &ended);
+  ASSERT_TRUE(end.ok()) << end.error_message();
+  EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(ended.summary().counters().frames_integrated(), kFrames);
+  // Calling it again answers with the same summary.
+  v1::EndSessionResponse again;
+  ASSERT_TRUE(endSession(*stub, "monday", &again).ok());
+  EXPECT_EQ(again.summary().object_ids_size(), ended.summary().object_ids_size());
+
+  // The same frames through the offline pipeline give the same models.
+  database::InMemoryModelStore offline_store;
+  const auto offline = offlineModels("monday", kFrames, &offline_store);
+  ASSERT_FALSE(offline.empty());
+  const auto objects = listObjects(*stub);
+  ASSERT_EQ(objects.size(), offline.size());
+  ASSERT_EQ(size_t(ended.summary().object_ids_size()), offline.size());
+  for (size_t i = 0; i < objects.size(); ++i) {
+    EXPECT_EQ(objects[i].num_poses(), offline[i]->observations.size()) << i;
+    EXPECT_EQ(objects[i].planar(), offline[i]->planar) << i;
+    EXPECT_EQ(objects[i].session_names_size(), 1);
+    EXPECT_EQ(objects[i].session_names(0), "monday");
+    EXPECT_EQ(objects[i].state(), v1::OBJECT_STATE_ACTIVE);
+  }
+  // Paging walks the same objects one by one.
+  const auto paged = listObjects(*stub, "monday", 1);
+  ASSERT_EQ(paged.size(), objects.size());
+  for (size_t i = 0; i < paged.size(); ++i) EXPECT_EQ(paged[i].id(), objects[i].id());
+
+  // One object in full: its cloud is the offline model's, its mesh is not empty.
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetObjectRequest request;
+    request.set_id(objects.front().id());
+    request.set_include_mesh(true);
+    request.set_include_cloud(true);
+    v1::ObjectDetail detail;
+    const grpc::Status status = stub->GetObject(&context, request, &detail);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_EQ(detail.summary().id(), objects.front().id());
+    EXPECT_EQ(size_t(detail.poses_size()), offline.front()->observations.size());
+    EXPECT_EQ(detail.poses(0).session_name(), "monday");
+    EXPECT_GT(detail.poses(0).segment_id(), 0u);
+    EXPECT_EQ(size_t(detail.cloud().points_size()), 3 * offline.front()->cloud.points.size());
+    EXPECT_EQ(detail.stats().num_points(), offline.front()->cloud.points.size());
+    EXPECT_GT(detail.mesh().triangles_size(), 0);
+    EXPECT_EQ(detail.mesh().triangles_size() % 3, 0);
+    EXPECT_NEAR(detail.stats().voxel_size_m(), 0.02, 1e-6);
+  }
+
+  // The scene mesh, in chunks small enough to need several.
+  size_t triangles = 0, chunks = 0;
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetSceneMeshRequest request;
+    request.set_session_name("monday");
+    auto reader = stub->GetSceneMesh(&context, request);
+    v1::MeshChunk chunk;
+    bool last = false;
+    while (reader->Read(&chunk)) {
+      EXPECT_EQ(chunk.chunk_index(), chunks);
+      EXPECT_FALSE(last);
+      last = chunk.last();
+      const auto& mesh = chunk.mesh();
+      for (uint32_t index : mesh.triangles()) {
+        ASSERT_LT(index, uint32_t(mesh.vertices_size() / 3));
+      }
+      triangles += size_t(mesh.triangles_size() / 3);
+      ++chunks;
+    }
+    const grpc::Status status = reader->Finish();
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_TRUE(last);
+  }
+  EXPECT_GT(triangles, 1000u);
+  EXPECT_GE(chunks, 1u);
+
+  {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetStatsResponse stats;
+    ASSERT_TRUE(stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    EXPECT_EQ(stats.sessions_total(), 1u);
+    EXPECT_EQ(stats.sessions_open(), 0u);
+    EXPECT_EQ(stats.objects_active(), offline.size());
+    EXPECT_EQ(stats.frames_integrated(), kFrames);
+    EXPECT_GT(stats.segments_total(), 0u);
+  }
+
+  // A restart serves the same database.
+  server->shutdown();
+  server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  stub = stubFor(*server);
+  EXPECT_EQ(listObjects(*stub).size(), offline.size());
+  grpc::ClientContext context;
+  setDeadline(&context);
+  v1::ListSessionsResponse sessions;
+  ASSERT_TRUE(stub->ListSessions(&context, v1::ListSessionsRequest(), &sessions).ok());
+  ASSERT_EQ(sessions.sessions_size(), 1);
+  EXPECT_EQ(sessions.sessions(0).session_name(), "monday");
+  EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(sessions.sessions(0).counters().frames_integrated(), kFrames);
+  EXPECT_EQ(sessions.sessions(0).intrinsics().width(), uint32_t(twoBoxes().intrinsics.width));
+  EXPECT_GT(sessions.sessions(0).ended_unix_s(), sessions.sessions(0).started_unix_s());
+  // A second session of the same name is refused.
+  const IngestResult twice = ingest(*stub, session("monday", 1));
+  EXPECT_EQ(twice.status.error_code(), grpc::StatusCode::ALREADY_EXISTS)
+      << twice.status.error_message();
+}
+
+TEST(ObjectDatabaseService, BadHeadersEndTheStreamWithTheCodeAndTheField) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  const Recording& r = twoBoxes();
+  struct Case {
+    std::vector<v1::IngestRequest> requests;
+    grpc::StatusCode code;
+    std::string names;
+  };
+  Intrinsics outside = r.intrinsics;
+  outside.cx = r.intrinsics.width + 5.0;
+  std::vector<Case> cases = {
+      {{frame(r, 0)}, grpc::StatusCode::FAILED_PRECONDITION, "SessionHeader"},
+      {{}, grpc::StatusCode::FAILED_PRECONDITION, "before its SessionHeader"},
+      {{header("", r.intrinsics)}, grpc::StatusCode::INVALID_ARGUMENT, "session_name"},
+      {{header("a/b", r.intrinsics)}, grpc::StatusCode::INVALID_ARGUMENT, "session_name"},
+      {{header("s", outside)}, grpc::StatusCode::INVALID_ARGUMENT, "header.intrinsics"},
+      {{header("s", r.intrinsics, "{\"matching\": {\"k_nn\": 3}}")},
+       grpc::StatusCode::INVALID_ARGUMENT, "matching"},
+      {{header("s", r.intrinsics, "{\"gsm\": {\"no_such_key\": 1}}")},
+       grpc::StatusCode::INVALID_ARGUMENT, "no_such_key"},
+      {{header("s", r.intrinsics, "{\"tsdf\": {\"voxel_size_m\": 0.01}}")},
+       grpc::StatusCode::INVALID_ARGUMENT, "tsdf.voxel_size_m"},
+      {{header("s", r.intrinsics, "not json")}, grpc::StatusCode::INVALID_ARGUMENT, "params_json"},
+      {{header("twice", r.intrinsics), header("twice", r.intrinsics)},
+       grpc::StatusCode::FAILED_PRECONDITION, "second SessionHeader"},
+  };
+  for (const auto& c : cases) {
+    const IngestResult result = ingest(*stub, c.requests);
+    EXPECT_EQ(result.status.error_code(), c.code) << c.names << ": " << result.status.error_message();
+    EXPECT_NE(result.status.error_message().find(c.names), std::string::npos)
+        << result.status.error_message();
+  }
+  // A per-session override of its own map's parameters is fine.
+  const IngestResult tuned =
+      ingest(*stub, {header("tuned", r.intrinsics, "{\"gsm\": {\"extraction_age_frames\": 5}}"),
+                     frame(r, 0)});
+  EXPECT_TRUE(tuned.status.ok()) << tuned.status.error_message();
+}
+
+TEST(ObjectDatabaseService, BadFramesAreRejectedInTheirAckAndTheSessionCarriesOn) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  const Recording& r = twoBoxes();
+  std::vector<v1::IngestRequest> requests = {header("bad-frames", r.intrinsics), frame(r, 0)};
+  std::vector<std::string> expected;  // what each rejection's reason names
+  auto add = [&](v1::IngestRequest request, const std::string& names) {
+    request.mutable_frame()->set_index(100 + requests.size());
+    request.mutable_frame()->set_timestamp_s(10.0 + double(requests.size()));
+    requests.push_back(std::move(request));
+    expected.push_back(names);
+  };
+  v1::IngestRequest f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->set_width(10);
+  add(f, "frame.depth is 10x");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->mutable_data()->resize(100);
+  add(f, "frame.depth.data holds 100 bytes");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->set_encoding(v1::DepthImage::ENCODING_UNSPECIFIED);
+  add(f, "frame.depth.encoding");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->set_encoding(v1::DepthImage::FLOAT32);
+  add(f, "frame.depth.metres_per_unit");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->set_metres_per_unit(-1.0);
+  add(f, "frame.depth.metres_per_unit is -1");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->set_encoding(v1::DepthImage::PNG16);
+  add(f, "not a PNG");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_t_world_camera()->set_qw(std::nan(""));
+  add(f, "frame.T_world_camera");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_t_world_camera()->set_qw(0.0);
+  f.mutable_frame()->mutable_t_world_camera()->set_qx(0.0);
+  f.mutable_frame()->mutable_t_world_camera()->set_qy(0.0);
+  f.mutable_frame()->mutable_t_world_camera()->set_qz(0.0);
+  add(f, "frame.T_world_camera");
+  f = frame(r, 1);
+  f.mutable_frame()->clear_depth();
+  add(f, "frame.depth is missing");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_color()->mutable_data()->resize(7);
+  add(f, "frame.color.data holds 7 bytes");
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_color()->set_encoding(v1::ColorImage::JPEG);
+  add(f, "frame.color");
+  // Indices and timestamps must grow.
+  requests.push_back(frame(r, 0));  // frame 0 again
+  expected.push_back("frame.index 0 is not above the previous frame's 0");
+  f = frame(r, 2);
+  f.mutable_frame()->set_index(1000);
+  f.mutable_frame()->set_timestamp_s(std::numeric_limits<double>::infinity());
+  requests.push_back(f);
+  expected.push_back("frame.timestamp_s inf");
+  // And a good frame after all of them.
+  f = frame(r, 2);
+  f.mutable_frame()->set_index(2000);
+  f.mutable_frame()->set_timestamp_s(100.0);
+  requests.push_back(f);
+
+  const IngestResult result = ingest(*stub, requests);
+  ASSERT_TRUE(result.status.ok()) << result.status.error_message();
+  const auto acks = result.acks();
+  ASSERT_EQ(acks.size(), requests.size() - 1);
+  EXPECT_TRUE(acks.front().accepted()) << acks.front().reason();
+  for (size_t k = 0; k < expected.size(); ++k) {
+    const auto& ack = acks[1 + k];
+    EXPECT_FALSE(ack.accepted()) << expected[k];
+    EXPECT_EQ(ack.code(), int(grpc::StatusCode::INVALID_ARGUMENT)) << ack.reason();
+    EXPECT_NE(ack.reason().find(expected[k]), std::string::npos)
+        << "expected \"" << expected[k] << "\" in: " << ack.reason();
+  }
+  EXPECT_TRUE(acks.back().accepted()) << acks.back().reason();
+  EXPECT_EQ(acks.back().session().frames_rejected(), expected.size());
+  EXPECT_EQ(acks.back().session().frames_integrated(), 2u);
+  EXPECT_EQ(acks.back().session().frames_received(), requests.size() - 1);
+}
+
+TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOne) {
+  const std::string db_path = scratchDbPath();
+  auto server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  const Recording& r = twoBoxes();
+
+  // A stream left open: EndSession refuses while it is.
+  grpc::ClientContext context;
+  setDeadline(&context);
+  auto stream = stub->Ingest(&context);
+  ASSERT_TRUE(stream->Write(header("tuesday", r.intrinsics)));
+  for (size_t k = 0; k < 12; ++k) ASSERT_TRUE(stream->Write(frame(r, k)));
+  v1::IngestResponse response;
+  for (size_t acked = 0; acked < 12;) {  // all frames integrated
+    ASSERT_TRUE(stream->Read(&response));
+    acked += response.has_ack() ? 1 : 0;
+  }
+  v1::EndSessionResponse ended;
+  grpc::Status end = endSession(*stub, "tuesday", &ended);
+  EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << end.error_message();
+  EXPECT_NE(end.error_message().find("stream open"), std::string::npos) << end.error_message();
+
+  // The client goes away: the session is interrupted, its map kept, and EndSession flushes it.
+  context.TryCancel();
+  EXPECT_FALSE(stream->Finish().ok());
+  v1::ListSessionsResponse sessions;
+  for (int attempt = 0; attempt < 200; ++attempt) {
+    grpc::ClientContext list_context;
+    setDeadline(&list_context);
+    ASSERT_TRUE(stub->ListSessions(&list_context, v1::ListSessionsRequest(), &sessions).ok());
+    if (sessions.sessions(0).state() == v1::SESSION_STATE_INTERRUPTED) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_INTERRUPTED);
+  end = endSession(*stub, "tuesday", &ended);
+  ASSERT_TRUE(end.ok()) << end.error_message();
+  EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(ended.summary().counters().frames_integrated(), 12u);
+  EXPECT_GT(ended.summary().object_ids_size(), 0);
+
+  // A session still open when the server stops loses its map: interrupted after the restart,
+  // and EndSession says why it cannot flush it.
+  const IngestResult open = ingest(*stub, session("wednesday", 3));
+  ASSERT_TRUE(open.status.ok()) << open.status.error_message();
+  server->shutdown();
+  server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  stub = stubFor(*server);
+  end = endSession(*stub, "wednesday", &ended);
+  EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(end.error_message().find("not kept"), std::string::npos) << end.error_message();
+  grpc::ClientContext list_context;
+  setDeadline(&list_context);
+  ASSERT_TRUE(stub->ListSessions(&list_context, v1::ListSessionsRequest(), &sessions).ok());
+  ASSERT_EQ(sessions.sessions_size(), 2);
+  EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(sessions.sessions(1).state(), v1::SESSION_STATE_INTERRUPTED);
+  // Its scene was never stored.
+  grpc::ClientContext mesh_context;
+  setDeadline(&mesh_context);
+  v1::GetSceneMeshRequest request;
+  request.set_session_name("wednesday");
+  auto reader = stub->GetSceneMesh(&mesh_context, request);
+  v1::MeshChunk chunk;
+  EXPECT_FALSE(reader->Read(&chunk));
+  EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+TEST(ObjectDatabaseService, PageTokensAreCheckedAgainstTheirListing) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  const IngestResult a = ingest(*stub, session("a", 1));
+  const IngestResult b = ingest(*stub, session("b", 1));
+  ASSERT_TRUE(a.status.ok() && b.status.ok());
+  grpc::ClientContext context;
+  setDeadline(&context);
+  v1::ListSessionsRequest request;
+  request.set_page_size(1);
+  v1::ListSessionsResponse first;
+  ASSERT_TRUE(stub->ListSessions(&context, request, &first).ok());
+  ASSERT_EQ(first.sessions_size(), 1);
+  EXPECT_EQ(first.sessions(0).session_name(), "a");
+  EXPECT_EQ(first.sessions(0).state(), v1::SESSION_STATE_OPEN);
+  EXPECT_EQ(first.sessions(0).client_info(), "object_database_service_test");
+  ASSERT_FALSE(first.next_page_token().empty());
+  request.set_page_token(first.next_page_token());
+  grpc::ClientContext second_context;
+  setDeadline(&second_context);
+  v1::ListSessionsResponse second;
+  ASSERT_TRUE(stub->ListSessions(&second_context, request, &second).ok());
+  ASSERT_EQ(second.sessions_size(), 1);
+  EXPECT_EQ(second.sessions(0).session_name(), "b");
+  EXPECT_TRUE(second.next_page_token().empty());
+
+  // A session token used for objects, a token of another filter, garbage: INVALID_ARGUMENT.
+  for (const std::string& token : {first.next_page_token(), std::string("o.0.1"),
+                                   std::string("garbage")}) {
+    grpc::ClientContext objects_context;
+    setDeadline(&objects_context);
+    v1::ListObjectsRequest objects;
+    objects.set_page_token(token);
+    v1::ListObjectsResponse listed;
+    const grpc::Status status = stub->ListObjects(&objects_context, objects, &listed);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << token;
+    EXPECT_NE(status.error_message().find("page_token"), std::string::npos);
+  }
+  grpc::ClientContext unknown_context;
+  setDeadline(&unknown_context);
+  v1::ListObjectsRequest unknown;
+  unknown.set_session_name("nobody");
+  v1::ListObjectsResponse listed;
+  EXPECT_EQ(stub->ListObjects(&unknown_context, unknown, &listed).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+}
+
+}  // namespace
+}  // namespace objdb
