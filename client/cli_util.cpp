@@ -2,6 +2,8 @@
 
 #include "core/common/params_io.h"
 
+#include "absl/strings/str_format.h"
+
 #include <algorithm>
 #include <cerrno>
 #include <cstdio>
@@ -23,6 +25,30 @@ std::vector<std::filesystem::path> datasetSubfolders(const std::filesystem::path
   }
   std::sort(folders.begin(), folders.end());
   return folders;
+}
+
+StatusOr<std::vector<std::pair<std::string, std::filesystem::path>>> datasetSessions(
+    const std::vector<std::string>& paths) {
+  namespace fs = std::filesystem;
+  std::vector<std::pair<std::string, fs::path>> out;
+  for (const auto& arg : paths) {
+    const fs::path p = fs::path(arg).lexically_normal();
+    if (isDatasetDir(p)) {
+      out.emplace_back(p.filename().string(), p);
+      continue;
+    }
+    std::error_code ec;
+    if (!fs::is_directory(p, ec)) {
+      return absl::NotFoundError(absl::StrFormat("%s is not a dataset folder", arg));
+    }
+    const std::vector<fs::path> children = datasetSubfolders(p);
+    if (children.empty()) {
+      return absl::NotFoundError(absl::StrFormat(
+          "%s holds no dataset (no poses.txt or depth.txt in it or its subfolders)", arg));
+    }
+    for (const auto& c : children) out.emplace_back(c.filename().string(), c);
+  }
+  return out;
 }
 
 bool parseInt(const char* text, long long lo, long long hi, long long* out) {

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/common/params.h"
@@ -15,6 +16,12 @@ namespace objdb::cli {
 bool isDatasetDir(const std::filesystem::path& path);
 // The dataset folders directly inside `root` (a folder of sessions), in name order.
 std::vector<std::filesystem::path> datasetSubfolders(const std::filesystem::path& root);
+
+// The sessions named by command-line paths, as (name, folder) in order: a dataset folder is one
+// session named after it; a folder of dataset folders gives each of them, in name order.
+// NOT_FOUND for a path that is neither.
+StatusOr<std::vector<std::pair<std::string, std::filesystem::path>>> datasetSessions(
+    const std::vector<std::string>& paths);
 
 // Parses a whole decimal integer within [lo, hi]; false on anything else.
 bool parseInt(const char* text, long long lo, long long hi, long long* out);

@@ -13,5 +13,7 @@ int runInfoCommand(int argc, char** argv);    // info_command.cpp
 int runSegmentCommand(int argc, char** argv); // segment_command.cpp
 int runDbCommand(int argc, char** argv);      // db_command.cpp
 int runIngestCommand(int argc, char** argv);  // ingest_command.cpp
+int runStreamCommand(int argc, char** argv);  // stream_command.cpp
+int runRemoteCommand(int argc, char** argv);  // remote_command.cpp
 
 }  // namespace objdb

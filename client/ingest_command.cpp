@@ -40,32 +40,6 @@ map is stored. The file is created when missing; sessions already in it are refu
 
 constexpr const char* kCommand = "ingest";
 
-namespace fs = std::filesystem;
-
-// The sessions named by the arguments: (name, folder), in order.
-StatusOr<std::vector<std::pair<std::string, fs::path>>> sessionsOf(
-    const std::vector<std::string>& paths) {
-  std::vector<std::pair<std::string, fs::path>> out;
-  for (const auto& arg : paths) {
-    const fs::path p = fs::path(arg).lexically_normal();
-    if (cli::isDatasetDir(p)) {
-      out.emplace_back(p.filename().string(), p);
-      continue;
-    }
-    std::error_code ec;
-    if (!fs::is_directory(p, ec)) {
-      return absl::NotFoundError(absl::StrFormat("%s is not a dataset folder", arg));
-    }
-    const std::vector<fs::path> children = cli::datasetSubfolders(p);
-    if (children.empty()) {
-      return absl::NotFoundError(absl::StrFormat(
-          "%s holds no dataset (no poses.txt or depth.txt in it or its subfolders)", arg));
-    }
-    for (const auto& c : children) out.emplace_back(c.filename().string(), c);
-  }
-  return out;
-}
-
 }  // namespace
 
 int runIngestCommand(int argc, char** argv) {
@@ -109,7 +83,7 @@ int runIngestCommand(int argc, char** argv) {
   if (!loaded.ok()) return cli::reportError(kCommand, loaded.status());
   Params params = *loaded;
   params.database.threads = int(threads);
-  auto sessions = sessionsOf(datasets);
+  auto sessions = cli::datasetSessions(datasets);
   if (!sessions.ok()) return cli::reportError(kCommand, sessions.status());
 
   storage::SqliteStoreOptions options;

@@ -20,6 +20,8 @@ commands:
   segment  segment one dataset frame and write its steps as PNGs (depth, normals, labels, ...)
   ingest   run datasets through segmentation, GSM and the object database into a SQLite file
   db       check, describe and export from a database file (read-only)
+  stream   stream datasets to an objdb server (one Ingest stream per session, then EndSession)
+  remote   ask an objdb server: stats, sessions, objects, an object's mesh, a scene's mesh
   help     show this text
 
 Run "objdb <command> --help" for the options of a command.
@@ -45,6 +47,8 @@ int main(int argc, char** argv) {
   if (command == "gsm") return objdb::runGsmCommand(argc - 1, argv + 1);
   if (command == "db") return objdb::runDbCommand(argc - 1, argv + 1);
   if (command == "ingest") return objdb::runIngestCommand(argc - 1, argv + 1);
+  if (command == "stream") return objdb::runStreamCommand(argc - 1, argv + 1);
+  if (command == "remote") return objdb::runRemoteCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }

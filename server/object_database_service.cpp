@@ -635,9 +635,10 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     std::lock_guard lock(session.mutex);
     v1::SessionCounters& c = session.counters;
     c.set_segments_extracted(c.segments_extracted() + 1);
+    // As the events say: a segment merged, or a model created for it.
     if (report->merged) {
       c.set_objects_merged(c.objects_merged() + 1);
-    } else if (!report->replaced_earlier) {
+    } else {
       c.set_objects_created(c.objects_created() + 1);
     }
   }

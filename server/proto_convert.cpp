@@ -244,6 +244,72 @@ StatusOr<ColorImage> decodeColor(const v1::ColorImage& color, int width, int hei
   }
 }
 
+v1::DepthImage encodeDepth(const DepthImage& depth) {
+  v1::DepthImage out;
+  out.set_width(uint32_t(depth.width));
+  out.set_height(uint32_t(depth.height));
+  out.set_encoding(v1::DepthImage::FLOAT32);
+  std::string& data = *out.mutable_data();
+  data.resize(depth.data.size() * 4);
+  for (size_t i = 0; i < depth.data.size(); ++i) {
+    uint32_t bits;
+    std::memcpy(&bits, &depth.data[i], 4);
+    for (int b = 0; b < 4; ++b) data[4 * i + size_t(b)] = char((bits >> (8 * b)) & 0xFF);
+  }
+  return out;
+}
+
+v1::ColorImage encodeColor(const ColorImage& color) {
+  static_assert(sizeof(Rgb8) == 3);
+  v1::ColorImage out;
+  out.set_width(uint32_t(color.width));
+  out.set_height(uint32_t(color.height));
+  out.set_encoding(v1::ColorImage::RGB8);
+  out.set_data(std::string(reinterpret_cast<const char*>(color.data.data()), color.data.size() * 3));
+  return out;
+}
+
+namespace {
+
+std::vector<Eigen::Vector3f> vectorsOf(const google::protobuf::RepeatedField<float>& values) {
+  std::vector<Eigen::Vector3f> out(size_t(values.size()) / 3);
+  for (size_t i = 0; i < out.size(); ++i) {
+    out[i] = {values[int(3 * i)], values[int(3 * i + 1)], values[int(3 * i + 2)]};
+  }
+  return out;
+}
+
+std::vector<Rgb8> colorsOf(const std::string& bytes, size_t n) {
+  if (bytes.size() != 3 * n) return {};
+  std::vector<Rgb8> out(n);
+  std::memcpy(out.data(), bytes.data(), bytes.size());
+  return out;
+}
+
+}  // namespace
+
+TriangleMesh meshFromProto(const v1::Mesh& mesh) {
+  TriangleMesh out;
+  out.vertices = vectorsOf(mesh.vertices());
+  out.normals = vectorsOf(mesh.normals());
+  if (out.normals.size() != out.vertices.size()) out.normals.clear();
+  out.colors = colorsOf(mesh.colors(), out.vertices.size());
+  for (int i = 0; i + 2 < mesh.triangles_size(); i += 3) {
+    out.triangles.emplace_back(int(mesh.triangles(i)), int(mesh.triangles(i + 1)),
+                               int(mesh.triangles(i + 2)));
+  }
+  return out;
+}
+
+PointCloud cloudFromProto(const v1::PointCloud& cloud) {
+  PointCloud out;
+  out.points = vectorsOf(cloud.points());
+  out.normals = vectorsOf(cloud.normals());
+  if (out.normals.size() != out.points.size()) out.normals.clear();
+  out.colors = colorsOf(cloud.colors(), out.points.size());
+  return out;
+}
+
 void toProto(const TriangleMesh& mesh, v1::Mesh* out) {
   out->Clear();
   out->mutable_vertices()->Reserve(int(mesh.vertices.size() * 3));

@@ -41,7 +41,14 @@ StatusOr<DepthImage> decodeDepth(const v1::DepthImage& depth, const Intrinsics& 
 // Colour from its wire encoding; its size must be width × height.
 StatusOr<ColorImage> decodeColor(const v1::ColorImage& color, int width, int height);
 
+// Wire encodings a client sends: FLOAT32 depth (metres, exact) and RGB8 colour.
+v1::DepthImage encodeDepth(const DepthImage& depth);
+v1::ColorImage encodeColor(const ColorImage& color);
+
 void toProto(const TriangleMesh& mesh, v1::Mesh* out);
+// What a client receives, back in core types (attributes of the wrong length are dropped).
+TriangleMesh meshFromProto(const v1::Mesh& mesh);
+PointCloud cloudFromProto(const v1::PointCloud& cloud);
 void toProto(const PointCloud& cloud, v1::PointCloud* out);
 // The mesh cut into independent sub-meshes of at most about `max_bytes` each once serialised
 // (triangles in order; each chunk carries the vertices its triangles use). An empty mesh gives

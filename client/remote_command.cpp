@@ -1,0 +1,252 @@
+// `objdb remote`: the query RPCs of a running objdb server — statistics, sessions, objects, one
+// object's geometry, a session's (completed) scene mesh — the on-line counterpart of `objdb db`.
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "client/cli_util.h"
+#include "client/commands.h"
+#include "client/remote.h"
+#include "core/io/mesh_io.h"
+#include "server/proto_convert.h"
+
+namespace objdb {
+namespace {
+
+constexpr const char* kCommand = "remote";
+
+constexpr const char* kUsage = R"(usage: objdb remote stats    [--server HOST:PORT]
+       objdb remote sessions [--server HOST:PORT]
+       objdb remote objects  [--server HOST:PORT] [--session NAME] [--merged]
+       objdb remote object   [--server HOST:PORT] --id ID [--out FILE.ply --what mesh|cloud]
+       objdb remote scene    [--server HOST:PORT] --session NAME --out FILE.ply [--completed]
+
+Asks a running objdb server (objdb-server) about its database.
+
+  stats     server and database statistics (GetStats)
+  sessions  every session: state, frames, start and end time, client (ListSessions)
+  objects   the objects, one line each: sessions, poses, extent, planar (ListObjects; every page)
+  object    one object's poses and statistics (GetObject); with --out its mesh (default) or its
+            surface cloud with normals, in the object's base frame, as PLY
+  scene     a session's mesh in its world frame as PLY (GetSceneMesh); --completed fills what the
+            session never saw with the database's merged models
+
+  --server HOST:PORT   server address (default 127.0.0.1:50051)
+  --timeout S          seconds a call may take (default 600)
+  -h, --help           show this text
+)";
+
+struct Options {
+  std::string server = cli::kDefaultServer;
+  std::string session, out, what = "mesh";
+  long long id = 0;
+  bool merged = false, completed = false;
+  double timeout_s = 600.0;
+};
+
+std::string extent(const v1::BoundingBox& box) {
+  return absl::StrFormat("%.2f x %.2f x %.2f", box.max().x() - box.min().x(),
+                         box.max().y() - box.min().y(), box.max().z() - box.min().z());
+}
+
+int stats(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  grpc::ClientContext context;
+  cli::setDeadline(&context, o.timeout_s);
+  v1::GetStatsResponse s;
+  const grpc::Status status = stub.GetStats(&context, v1::GetStatsRequest(), &s);
+  if (!status.ok()) return cli::reportRpcError(kCommand, "GetStats", o.server, status);
+  std::printf("server %s, version %s, up %.0f s\n", o.server.c_str(), s.server_version().c_str(),
+              s.uptime_s());
+  std::printf("sessions: %llu (%u streaming now), %llu frames integrated\n",
+              (unsigned long long)s.sessions_total(), s.sessions_open(),
+              (unsigned long long)s.frames_integrated());
+  std::printf("objects: %llu active, %llu merged; %llu raw segments; %u segments queued\n",
+              (unsigned long long)s.objects_active(), (unsigned long long)s.objects_merged(),
+              (unsigned long long)s.segments_total(), s.queued_segments());
+  std::printf("database: %.1f MB on disk; %llu jobs cancelled, %llu unreadable candidates skipped\n",
+              double(s.database_size_bytes()) / 1e6, (unsigned long long)s.jobs_cancelled(),
+              (unsigned long long)s.candidates_skipped());
+  return 0;
+}
+
+int sessions(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  v1::ListSessionsRequest request;
+  std::printf("%-24s %-12s %8s %10s %10s  %s\n", "session", "state", "frames", "segments",
+              "objects+", "client");
+  while (true) {
+    grpc::ClientContext context;
+    cli::setDeadline(&context, o.timeout_s);
+    v1::ListSessionsResponse page;
+    const grpc::Status status = stub.ListSessions(&context, request, &page);
+    if (!status.ok()) return cli::reportRpcError(kCommand, "ListSessions", o.server, status);
+    for (const auto& s : page.sessions()) {
+      std::string state = v1::SessionState_Name(s.state());
+      state = state.substr(std::string("SESSION_STATE_").size());
+      std::printf("%-24s %-12s %8llu %10llu %10llu  %s\n", s.session_name().c_str(), state.c_str(),
+                  (unsigned long long)s.counters().frames_integrated(),
+                  (unsigned long long)s.counters().segments_extracted(),
+                  (unsigned long long)s.counters().objects_created(), s.client_info().c_str());
+    }
+    if (page.next_page_token().empty()) return 0;
+    request.set_page_token(page.next_page_token());
+  }
+}
+
+int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  v1::ListObjectsRequest request;
+  request.set_session_name(o.session);
+  request.set_include_merged(o.merged);
+  request.set_page_size(1000);
+  size_t count = 0;
+  std::printf("%8s %-7s %6s %-22s %7s  %s\n", "id", "state", "poses", "extent (m)", "planar",
+              "sessions");
+  while (true) {
+    grpc::ClientContext context;
+    cli::setDeadline(&context, o.timeout_s);
+    v1::ListObjectsResponse page;
+    const grpc::Status status = stub.ListObjects(&context, request, &page);
+    if (!status.ok()) return cli::reportRpcError(kCommand, "ListObjects", o.server, status);
+    for (const auto& m : page.objects()) {
+      std::printf("%8llu %-7s %6u %-22s %7s  %s\n", (unsigned long long)m.id(),
+                  m.state() == v1::OBJECT_STATE_MERGED ? "merged" : "active", m.num_poses(),
+                  extent(m.bounds_object()).c_str(), m.planar() ? "yes" : "no",
+                  absl::StrJoin(m.session_names(), ", ").c_str());
+      ++count;
+    }
+    if (page.next_page_token().empty()) break;
+    request.set_page_token(page.next_page_token());
+  }
+  std::printf("%zu objects\n", count);
+  return 0;
+}
+
+int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  grpc::ClientContext context;
+  cli::setDeadline(&context, o.timeout_s);
+  v1::GetObjectRequest request;
+  request.set_id(uint64_t(o.id));
+  request.set_include_mesh(!o.out.empty() && o.what == "mesh");
+  request.set_include_cloud(!o.out.empty() && o.what == "cloud");
+  v1::ObjectDetail d;
+  const grpc::Status status = stub.GetObject(&context, request, &d);
+  if (!status.ok()) return cli::reportRpcError(kCommand, "GetObject", o.server, status);
+  std::printf("object %llu: %s, %s, extent %s m, %u points, %u keypoints, %u voxels of %.3f m, "
+              "%u merges\n",
+              (unsigned long long)d.summary().id(),
+              d.summary().state() == v1::OBJECT_STATE_MERGED ? "merged" : "active",
+              d.summary().planar() ? "planar" : "not planar",
+              extent(d.summary().bounds_object()).c_str(), d.stats().num_points(),
+              d.stats().num_keypoints(), d.stats().num_voxels(), d.stats().voxel_size_m(),
+              d.stats().num_merges());
+  for (const auto& p : d.poses()) {
+    const auto& T = p.t_world_object();
+    std::printf("  seen in %-20s at (%.3f, %.3f, %.3f), q (%.4f, %.4f, %.4f, %.4f), segment %llu\n",
+                p.session_name().c_str(), T.x(), T.y(), T.z(), T.qx(), T.qy(), T.qz(), T.qw(),
+                (unsigned long long)p.segment_id());
+  }
+  if (o.out.empty()) return 0;
+  const Status written =
+      o.what == "mesh" ? io::writePlyMesh(o.out, server::meshFromProto(d.mesh()))
+                       : io::writePlyCloud(o.out, server::cloudFromProto(d.cloud()));
+  if (!written.ok()) return cli::reportError(kCommand, written);
+  std::printf("%s written to %s\n", o.what.c_str(), o.out.c_str());
+  return 0;
+}
+
+int scene(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  grpc::ClientContext context;
+  cli::setDeadline(&context, o.timeout_s);
+  v1::GetSceneMeshRequest request;
+  request.set_session_name(o.session);
+  request.set_completed(o.completed);
+  auto reader = stub.GetSceneMesh(&context, request);
+  TriangleMesh mesh;
+  v1::MeshChunk chunk;
+  size_t chunks = 0;
+  while (reader->Read(&chunk)) {
+    mesh.append(server::meshFromProto(chunk.mesh()));
+    ++chunks;
+  }
+  const grpc::Status status = reader->Finish();
+  if (!status.ok()) return cli::reportRpcError(kCommand, "GetSceneMesh", o.server, status);
+  if (Status written = io::writePlyMesh(o.out, mesh); !written.ok()) {
+    return cli::reportError(kCommand, written);
+  }
+  std::printf("session %s%s: %zu chunks, %zu vertices, %zu triangles, %.2f m² written to %s\n",
+              o.session.c_str(), o.completed ? " (completed)" : "", chunks, mesh.vertices.size(),
+              mesh.triangles.size(), mesh.surfaceArea(), o.out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+int runRemoteCommand(int argc, char** argv) {
+  if (argc < 2) return cli::usageError(kCommand, "no action given", kUsage);
+  const std::string action = argv[1];
+  if (action == "-h" || action == "--help") {
+    std::fputs(kUsage, stdout);
+    return 0;
+  }
+  Options o;
+  for (int i = 2; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "-h" || a == "--help") {
+      std::fputs(kUsage, stdout);
+      return 0;
+    }
+    if (a == "--merged") {
+      o.merged = true;
+      continue;
+    }
+    if (a == "--completed") {
+      o.completed = true;
+      continue;
+    }
+    if (i + 1 >= argc) return cli::usageError(kCommand, a + " needs a value", kUsage);
+    const char* value = argv[++i];
+    long long seconds = 0;
+    if (a == "--server") {
+      o.server = value;
+    } else if (a == "--session") {
+      o.session = value;
+    } else if (a == "--out") {
+      o.out = value;
+    } else if (a == "--what") {
+      o.what = value;
+      if (o.what != "mesh" && o.what != "cloud") {
+        return cli::usageError(kCommand, "--what must be mesh or cloud, got " + o.what, kUsage);
+      }
+    } else if (a == "--id") {
+      if (!cli::parseInt(value, 1, INT64_MAX, &o.id)) {
+        return cli::usageError(kCommand, std::string("--id needs a positive integer, got ") + value, kUsage);
+      }
+    } else if (a == "--timeout") {
+      if (!cli::parseInt(value, 1, 86400, &seconds)) {
+        return cli::usageError(kCommand, std::string("--timeout needs 1..86400 seconds, got ") + value, kUsage);
+      }
+      o.timeout_s = double(seconds);
+    } else {
+      return cli::usageError(kCommand, "unknown option '" + a + "'", kUsage);
+    }
+  }
+  if (o.server.empty()) return cli::usageError(kCommand, "--server is empty", kUsage);
+  auto stub = cli::objectDatabaseStub(o.server);
+  if (action == "stats") return stats(*stub, o);
+  if (action == "sessions") return sessions(*stub, o);
+  if (action == "objects") return objects(*stub, o);
+  if (action == "object") {
+    if (o.id == 0) return cli::usageError(kCommand, "object needs --id ID", kUsage);
+    return object(*stub, o);
+  }
+  if (action == "scene") {
+    if (o.session.empty() || o.out.empty()) {
+      return cli::usageError(kCommand, "scene needs --session NAME and --out FILE.ply", kUsage);
+    }
+    return scene(*stub, o);
+  }
+  return cli::usageError(kCommand, "unknown action \"" + action + "\"", kUsage);
+}
+
+}  // namespace objdb

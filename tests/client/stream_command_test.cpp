@@ -1,0 +1,140 @@
+// `objdb stream` and `objdb remote` against a loopback server: two sessions of the same tiny
+// scene streamed over gRPC build the database `objdb ingest` builds offline, and every query
+// action answers; bad arguments and an unreachable server are clear errors.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "server/server.h"
+#include "storage/sqlite_store.h"
+#include "tests/support/subprocess.h"
+#include "tests/support/temp_dir.h"
+
+namespace objdb {
+namespace {
+
+using testing::ProcessResult;
+using testing::runProcess;
+namespace fs = std::filesystem;
+
+const std::string kObjdb = OBJDB_CLIENT_BINARY;
+
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+std::unique_ptr<ObjdbServer> startServer(const fs::path& db) {
+  ServerOptions options;
+  options.listen_address = "127.0.0.1:0";
+  options.db_path = db.string();
+  StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
+  EXPECT_TRUE(server.ok()) << server.status();
+  return server.ok() ? *std::move(server) : nullptr;
+}
+
+TEST(StreamCommand, StreamedSessionsBuildWhatIngestBuildsAndRemoteDescribesThem) {
+  testing::TempDir dir;
+  const fs::path sessions = dir / "sessions";
+  ProcessResult r = runProcess({kObjdb, "sim", "--preset", "two-boxes", "--frames", "20",
+                                "--camera", "tango", "--out", (sessions / "monday").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  fs::copy(sessions / "monday", sessions / "tuesday", fs::copy_options::recursive);
+
+  auto server = startServer(dir / "served.sqlite");
+  ASSERT_NE(server, nullptr);
+  const std::string address = server->address();
+  r = runProcess({kObjdb, "stream", "--server", address, sessions.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_TRUE(contains(r.out, "session monday: 20 frames")) << r.out;
+  EXPECT_TRUE(contains(r.out, "20 frames acked (0 rejected)")) << r.out;
+  EXPECT_TRUE(contains(r.out, "ended: 20 frames integrated")) << r.out;
+  EXPECT_TRUE(contains(r.out, "session tuesday: 20 frames")) << r.out;
+
+  // The offline pipeline on the same folders: the same models and merges.
+  r = runProcess({kObjdb, "ingest", "--db", (dir / "offline.sqlite").string(), sessions.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  auto offline = storage::SqliteStore::open((dir / "offline.sqlite").string()).value();
+  const auto offline_ids = offline->modelIds().value();
+  const auto served_ids = server->store().modelIds().value();
+  ASSERT_EQ(served_ids.size(), offline_ids.size());
+  EXPECT_EQ(server->store().mergeRecords().value().size(), 2u);
+  EXPECT_EQ(offline->mergeRecords().value().size(), 2u);
+  for (size_t i = 0; i < served_ids.size(); ++i) {
+    const auto a = server->store().model(served_ids[i]).value();
+    const auto b = offline->model(offline_ids[i]).value();
+    EXPECT_EQ(a->observations.size(), b->observations.size()) << i;
+    EXPECT_EQ(a->cloud.points.size(), b->cloud.points.size()) << i;
+  }
+
+  r = runProcess({kObjdb, "remote", "stats", "--server", address});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "sessions: 2 (0 streaming now), 40 frames integrated")) << r.out;
+  EXPECT_TRUE(contains(r.out, absl::StrCat("objects: ", served_ids.size(), " active"))) << r.out;
+  r = runProcess({kObjdb, "remote", "sessions", "--server", address});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "monday")) << r.out;
+  EXPECT_TRUE(contains(r.out, "ENDED")) << r.out;
+  EXPECT_TRUE(contains(r.out, "objdb stream")) << r.out;
+  r = runProcess({kObjdb, "remote", "objects", "--server", address, "--session", "tuesday"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "monday, tuesday")) << r.out;  // the merged boxes
+  const fs::path cloud = dir / "object.ply";
+  r = runProcess({kObjdb, "remote", "object", "--server", address, "--id",
+                  std::to_string(served_ids.front()), "--out", cloud.string(), "--what", "cloud"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "seen in monday")) << r.out;
+  EXPECT_GT(fs::file_size(cloud), 1000u);
+  const fs::path scene = dir / "scene.ply";
+  r = runProcess({kObjdb, "remote", "scene", "--server", address, "--session", "tuesday", "--out",
+                  scene.string(), "--completed"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "session tuesday (completed)")) << r.out;
+  EXPECT_GT(fs::file_size(scene), 10000u);
+
+  // A session name the database holds already.
+  r = runProcess({kObjdb, "stream", "--server", address, (sessions / "monday").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "ALREADY_EXISTS")) << r.err;
+  r = runProcess({kObjdb, "remote", "object", "--server", address, "--id", "99999"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "NOT_FOUND: no object 99999")) << r.err;
+}
+
+TEST(StreamCommand, BadArgumentsAndAMissingServerAreClearErrors) {
+  testing::TempDir dir;
+  ProcessResult r = runProcess({kObjdb, "stream"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "at least one DATASET")) << r.err;
+  r = runProcess({kObjdb, "stream", "d", "--every", "0"});
+  EXPECT_EQ(r.exit_code, 2);
+  r = runProcess({kObjdb, "stream", dir.path().string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "holds no dataset")) << r.err;
+  r = runProcess({kObjdb, "remote"});
+  EXPECT_EQ(r.exit_code, 2);
+  r = runProcess({kObjdb, "remote", "launch"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "unknown action")) << r.err;
+  r = runProcess({kObjdb, "remote", "object"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "--id")) << r.err;
+  r = runProcess({kObjdb, "remote", "scene", "--session", "s"});
+  EXPECT_EQ(r.exit_code, 2);
+  // Nothing listens on the port of a stopped server.
+  std::string address;
+  {
+    auto server = startServer(dir / "gone.sqlite");
+    ASSERT_NE(server, nullptr);
+    address = server->address();
+  }
+  r = runProcess({kObjdb, "remote", "stats", "--server", address, "--timeout", "5"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "UNAVAILABLE")) << r.err;
+  EXPECT_TRUE(contains(r.err, "is objdb-server running there?")) << r.err;
+}
+
+}  // namespace
+}  // namespace objdb
