@@ -74,7 +74,7 @@ int stats(v1::ObjectDatabase::Stub& stub, const Options& o) {
 int sessions(v1::ObjectDatabase::Stub& stub, const Options& o) {
   v1::ListSessionsRequest request;
   std::printf("%-24s %-12s %8s %10s %10s  %s\n", "session", "state", "frames", "segments",
-              "objects+", "client");
+              "created", "client");
   while (true) {
     grpc::ClientContext context;
     cli::setDeadline(&context, o.timeout_s);

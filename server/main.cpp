@@ -20,8 +20,10 @@ std::string usage() {
       R"(usage: objdb-server [options]
 
 Serves the objdb object database over gRPC (service objdb.v1.ObjectDatabase) together with the
-standard health service (grpc.health.v1.Health). SIGINT or SIGTERM drains calls in flight and
-stops the server; a second signal exits at once.
+standard health service (grpc.health.v1.Health): clients stream sessions in (Ingest, e.g.
+`objdb stream DATASET`) and query sessions, objects and meshes (`objdb remote`); see
+docs/server.md. SIGINT or SIGTERM drains calls in flight and stops the server; a second signal
+exits at once. Sessions not ended by then are stored as interrupted (their maps are lost).
 
 options:
   --listen HOST:PORT      address to listen on (default %s); port 0 picks a free
