@@ -34,6 +34,8 @@ constexpr uint32_t kDefaultPageSize = 100;
 constexpr uint32_t kMaxPageSize = 1000;
 constexpr size_t kMaxSessionName = 128;
 constexpr size_t kMaxClientInfo = 256;
+// Camera positions farther from the world origin are refused: voxel block indices stay small.
+constexpr double kMaxWorldExtentM = 10000.0;
 
 double nowUnixSeconds() {
   return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch())
@@ -110,6 +112,13 @@ int64_t fileBytes(const std::string& path) {
 // Sessions and streams
 // ---------------------------------------------------------------------------------------------
 
+// A raw segment waiting for the database, with why it was extracted.
+struct RawSegmentJob {
+  gsm::RawSegment segment;
+  v1::SegmentExtracted::Reason reason = v1::SegmentExtracted::IDLE;
+  uint64_t last_frame_index = 0;  // client index of the last frame that observed it
+};
+
 // One session with a map in memory: from its header until EndSession.
 struct LiveSession {
   std::string name;
@@ -126,24 +135,24 @@ struct LiveSession {
   uint64_t last_index = 0;
   double last_timestamp = 0.0;
 
+  // EndSession's segments (the database thread's): extracted once, inserted front first, so a
+  // failed flush can be retried without losing any.
+  bool flush_extracted = false;
+  std::deque<RawSegmentJob> flush_jobs;
+
   std::mutex mutex;  // guards what follows
   v1::SessionState state = v1::SESSION_STATE_OPEN;
   bool streaming = true;  // its Ingest stream (frame worker) is still running
-  bool ending = false;    // EndSession queued its flush
   double ended_unix_s = 0.0;
   v1::SessionCounters counters;
+  std::weak_ptr<IngestStream> stream;
+  // Database jobs to queue when the frame worker is done (EndSession of an interrupted stream).
+  std::vector<std::function<void()>> after_stream;
 
   v1::SessionCounters snapshot() {
     std::lock_guard lock(mutex);
     return counters;
   }
-};
-
-// A raw segment waiting for the database, with why it was extracted.
-struct RawSegmentJob {
-  gsm::RawSegment segment;
-  v1::SegmentExtracted::Reason reason = v1::SegmentExtracted::IDLE;
-  uint64_t last_frame_index = 0;  // client index of the last frame that observed it
 };
 
 // The jobs for segments extracted from `session`'s map (on the thread that owns the map).
@@ -158,7 +167,9 @@ struct IngestStream {
   std::recursive_mutex mutex;
   std::condition_variable_any changed;
   IngestReactor* reactor = nullptr;
-  std::shared_ptr<LiveSession> session;
+  bool header_seen = false;
+  v1::SessionHeader header;               // the first message, handed to the frame worker
+  std::shared_ptr<LiveSession> session;   // set by the frame worker once the session is open
   std::deque<v1::Frame> inbox;
   bool reads_paused = false;
   bool input_ended = false;  // the client half-closed
@@ -183,32 +194,31 @@ class IngestReactor final : public grpc::ServerBidiReactor<v1::IngestRequest, v1
 
   void OnReadDone(bool ok) override {
     std::lock_guard lock(stream_->mutex);
-    if (stream_->finished || stream_->cancelled) return;
-    if (!ok) {
-      if (!stream_->session) {
-        stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                                     "the stream ended before its SessionHeader"));
-      } else if (context_->IsCancelled()) {
+    if (stream_->finished) return;
+    if (!ok || stream_->cancelled) {
+      if (!stream_->header_seen) {  // no worker to end the call: end it here
+        stream_->finish(stream_->cancelled || context_->IsCancelled()
+                            ? grpc::Status(grpc::StatusCode::CANCELLED, "cancelled")
+                            : grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                           "the stream ended before its SessionHeader"));
+      } else if (!ok && context_->IsCancelled()) {
         stream_->cancelled = true;
-      } else {
+      } else if (!ok) {
         stream_->input_ended = true;
       }
       stream_->changed.notify_all();
       return;
     }
-    if (!stream_->session) {
+    if (!stream_->header_seen) {
       if (!request_.has_header()) {
         stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
                                      "the first message of an Ingest stream must be a "
                                      "SessionHeader; a frame came first"));
         return;
       }
-      auto session = service_->openSession(request_.header());
-      if (!session.ok()) {
-        stream_->finish(toGrpcStatus(session.status()));
-        return;
-      }
-      stream_->session = *session;
+      // The frame worker opens the session (checks, store write): no waiting on gRPC's threads.
+      stream_->header_seen = true;
+      stream_->header = request_.header();
       service_->startWorker([service = service_, stream = stream_] { service->runStream(stream); });
       StartRead(&request_);
       return;
@@ -217,7 +227,8 @@ class IngestReactor final : public grpc::ServerBidiReactor<v1::IngestRequest, v1
       stream_->cancelled = true;
       stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
                                    "a second SessionHeader on the stream of session " +
-                                       stream_->session->name + "; one stream is one session"));
+                                       stream_->header.session_name() +
+                                       "; one stream is one session"));
       stream_->changed.notify_all();
       return;
     }
@@ -252,6 +263,8 @@ class IngestReactor final : public grpc::ServerBidiReactor<v1::IngestRequest, v1
   void OnCancel() override {
     std::lock_guard lock(stream_->mutex);
     stream_->cancelled = true;
+    // Without a header there is no worker to end the call: gRPC needs Finish even when cancelled.
+    if (!stream_->header_seen) stream_->finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
     stream_->changed.notify_all();
   }
 
@@ -452,7 +465,27 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
 }
 
 void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
-  LiveSession& session = *stream->session;
+  v1::SessionHeader header;
+  {
+    std::lock_guard lock(stream->mutex);
+    header = stream->header;
+  }
+  auto opened = openSession(header);
+  if (!opened.ok()) {
+    std::lock_guard lock(stream->mutex);
+    stream->cancelled = true;
+    stream->finish(toGrpcStatus(opened.status()));
+    return;
+  }
+  {
+    std::lock_guard lock(stream->mutex);
+    stream->session = *opened;
+  }
+  LiveSession& session = **opened;
+  {
+    std::lock_guard lock(session.mutex);
+    session.stream = stream;
+  }
   bool ended_cleanly = false;
   while (true) {
     v1::Frame frame;
@@ -477,10 +510,7 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
     std::promise<void> done;
     database_queue_->push([&done] { done.set_value(); });
     done.get_future().wait();
-    {
-      std::lock_guard lock(session.mutex);
-      session.streaming = false;
-    }
+    endStreaming(*opened, false);
     auto summary = summaryOf(session);
     if (summary.ok()) {
       v1::IngestResponse response;
@@ -494,18 +524,37 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
                            session.name);
     return;
   }
-  {
-    std::lock_guard lock(session.mutex);
-    session.streaming = false;
-    session.state = v1::SESSION_STATE_INTERRUPTED;
-    session.ended_unix_s = nowUnixSeconds();
-  }
   jobs_cancelled_.fetch_add(1);
-  (void)store_->finishSession(session.name, storage::SessionState::kInterrupted,
-                              int64_t(session.snapshot().frames_integrated()));
+  endStreaming(*opened, true);
   stream->finish(grpc::Status(grpc::StatusCode::CANCELLED, "the Ingest stream was interrupted"));
   logger("server")->warn("session {}: stream interrupted; EndSession can still flush its map",
                          session.name);
+}
+
+void ObjectDatabaseService::endStreaming(const std::shared_ptr<LiveSession>& session,
+                                         bool interrupted) {
+  if (interrupted) {
+    // Stored on the database thread, so that it lands before any EndSession flush queued later.
+    database_queue_->push([this, session] {
+      {
+        std::lock_guard lock(session->mutex);
+        if (session->state == v1::SESSION_STATE_ENDED) return;
+      }
+      (void)store_->finishSession(session->name, storage::SessionState::kInterrupted,
+                                  int64_t(session->snapshot().frames_integrated()));
+    });
+  }
+  std::vector<std::function<void()>> pending;
+  {
+    std::lock_guard lock(session->mutex);
+    session->streaming = false;
+    if (interrupted) {
+      session->state = v1::SESSION_STATE_INTERRUPTED;
+      session->ended_unix_s = nowUnixSeconds();
+    }
+    pending.swap(session->after_stream);
+  }
+  for (auto& job : pending) database_queue_->push(std::move(job));
 }
 
 void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& stream_ptr,
@@ -543,6 +592,12 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
     }
     OBJDB_ASSIGN_OR_RETURN(const Transform T_world_camera,
                            fromProto(frame.t_world_camera(), "frame.T_world_camera"));
+    if (T_world_camera.translation().norm() > kMaxWorldExtentM) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "frame.T_world_camera is %g m from the world origin; at most %g m (a session's world "
+          "frame should be near where it was recorded)",
+          T_world_camera.translation().norm(), kMaxWorldExtentM));
+    }
     if (!frame.has_depth()) return absl::InvalidArgumentError("frame.depth is missing");
     DepthCounts counts;
     OBJDB_ASSIGN_OR_RETURN(const DepthImage depth,
@@ -573,8 +628,9 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
     return absl::OkStatus();
   };
   if (Status processed = run(); !processed.ok()) reject(processed);
-  stream.send(std::move(response));
-  if (!ack.accepted()) return;
+  const bool accepted = ack.accepted();
+  stream.send(std::move(response));  // moves the ack away
+  if (!accepted) return;
   std::vector<RawSegmentJob> jobs =
       jobsOf(session, session.map->extractIdle(), v1::SegmentExtracted::IDLE);
   if (!jobs.empty()) queueInserts(stream_ptr->session, stream_ptr, std::move(jobs), true);
@@ -664,10 +720,10 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     setVector(lo - half, e.mutable_bounds_world()->mutable_min());
     setVector(hi + half, e.mutable_bounds_world()->mutable_max());
   }
-  stream->send(std::move(extracted));
   v1::IngestResponse event;
   v1::ObjectEvent& o = *event.mutable_object();
   o.set_segment_id(e.segment_id());
+  stream->send(std::move(extracted));  // moves `e` away
   if (report->merged) {
     o.set_kind(v1::ObjectEvent::MERGED);
     o.set_into_object_id(uint64_t(report->model_id));
@@ -691,9 +747,18 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
 }
 
 Status ObjectDatabaseService::flush(LiveSession& session) {
-  std::vector<RawSegmentJob> jobs =
-      jobsOf(session, session.map->extractIdle(true), v1::SegmentExtracted::SESSION_END);
-  for (auto& job : jobs) OBJDB_RETURN_IF_ERROR(insert(session, nullptr, job));
+  if (!session.flush_extracted) {
+    for (auto& job :
+         jobsOf(session, session.map->extractIdle(true), v1::SegmentExtracted::SESSION_END)) {
+      session.flush_jobs.push_back(std::move(job));
+    }
+    session.flush_extracted = true;
+  }
+  const size_t flushed = session.flush_jobs.size();
+  while (!session.flush_jobs.empty()) {
+    OBJDB_RETURN_IF_ERROR(insert(session, nullptr, session.flush_jobs.front()));
+    session.flush_jobs.pop_front();
+  }
   OBJDB_RETURN_IF_ERROR(store_->putScene(
       session.name, std::make_shared<const tsdf::TsdfLayer>(session.map->tsdf().clone()),
       std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks())));
@@ -708,7 +773,7 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
   session.map.reset();
   session.segmenter.reset();
   logger("server")->info("session {} ended: {} frames, {} segments flushed at the end",
-                         session.name, frames, jobs.size());
+                         session.name, frames, flushed);
   return absl::OkStatus();
 }
 
@@ -774,19 +839,10 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
     return finishUnary(context,
                        absl::NotFoundError(absl::StrFormat("no session named \"%s\"", name)));
   }
-  {
-    std::lock_guard lock(session->mutex);
-    if (session->streaming) {
-      return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
-                                      "session %s still has its Ingest stream open; half-close "
-                                      "it (WritesDone) and read it to the end first",
-                                      name)));
-    }
-  }
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   // On the database thread, after every segment queued before it: flush once, then answer. A
   // second call queued behind the flush answers with the ended session's summary.
-  database_queue_->push([this, session, reactor, response] {
+  auto job = [this, session, reactor, response] {
     Status status = absl::OkStatus();
     bool ended = false;
     {
@@ -803,7 +859,28 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
       }
     }
     reactor->Finish(toGrpcStatus(status));
-  });
+  };
+  {
+    std::lock_guard lock(session->mutex);
+    if (session->streaming) {
+      // A stream already cancelled only waits for its frame worker to stop: queue behind it.
+      bool cancelled = false;
+      if (std::shared_ptr<IngestStream> stream = session->stream.lock()) {
+        std::lock_guard stream_lock(stream->mutex);
+        cancelled = stream->cancelled;
+      }
+      if (!cancelled) {
+        reactor->Finish(toGrpcStatus(absl::FailedPreconditionError(absl::StrFormat(
+            "session %s still has its Ingest stream open; half-close it (WritesDone) and read it "
+            "to the end first",
+            name))));
+        return reactor;
+      }
+      session->after_stream.push_back(std::move(job));
+      return reactor;
+    }
+  }
+  database_queue_->push(std::move(job));
   return reactor;
 }
 
@@ -882,6 +959,9 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
                                                            const v1::GetObjectRequest* request,
                                                            v1::ObjectDetail* response) {
   auto run = [&]() -> Status {
+    if (request->id() == 0 || request->id() > uint64_t(INT64_MAX)) {
+      return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
+    }
     const int64_t id = int64_t(request->id());
     storage::ModelQuery query;
     query.after_id = id - 1;
@@ -889,8 +969,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
     query.include_merged = true;
     OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::ModelSummary> found,
                            store_->modelSummaries(query));
-    if (request->id() == 0 || request->id() > uint64_t(INT64_MAX) || found.empty() ||
-        found.front().id != id) {
+    if (found.empty() || found.front().id != id) {
       return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
     }
     const storage::ModelSummary& summary = found.front();

@@ -94,8 +94,12 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   StatusOr<std::shared_ptr<LiveSession>> openSession(const v1::SessionHeader& header);
   void startWorker(std::function<void()> work);
   void runStream(std::shared_ptr<IngestStream> stream);
+  // The frame worker is done with the session's map: hands EndSession jobs that waited for it to
+  // the database queue; an interrupted session is stored as such (on the database thread).
+  void endStreaming(const std::shared_ptr<LiveSession>& session, bool interrupted);
   void processFrame(const std::shared_ptr<IngestStream>& stream, const v1::Frame& frame);
-  // Queues the database insert of each segment (frame workers wait when the queue is full).
+  // Queues the database insert of each segment (frame workers wait when the queue is full; they
+  // insert what they extracted even when their stream was cancelled: nothing extracted is lost).
   void queueInserts(const std::shared_ptr<LiveSession>& session,
                     const std::shared_ptr<IngestStream>& stream, std::vector<RawSegmentJob> jobs,
                     bool may_wait);

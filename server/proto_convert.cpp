@@ -36,22 +36,6 @@ Status checkLength(const std::string& field, size_t got, size_t want, const char
   return absl::OkStatus();
 }
 
-// The size a PNG's IHDR announces, read before anything is decoded; false when absent.
-bool pngSize(const std::string& bytes, uint32_t* width, uint32_t* height) {
-  static constexpr unsigned char kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
-  if (bytes.size() < 24 || std::memcmp(bytes.data(), kSignature, 8) != 0 ||
-      std::memcmp(bytes.data() + 12, "IHDR", 4) != 0) {
-    return false;
-  }
-  auto be32 = [&](size_t at) {
-    const auto* p = reinterpret_cast<const unsigned char*>(bytes.data() + at);
-    return (uint32_t(p[0]) << 24) | (uint32_t(p[1]) << 16) | (uint32_t(p[2]) << 8) | uint32_t(p[3]);
-  };
-  *width = be32(16);
-  *height = be32(20);
-  return true;
-}
-
 uint16_t le16(const char* p) {
   const auto* b = reinterpret_cast<const unsigned char*>(p);
   return uint16_t(b[0] | (b[1] << 8));
@@ -179,14 +163,8 @@ StatusOr<DepthImage> decodeDepth(const v1::DepthImage& depth, const Intrinsics& 
     }
     case v1::DepthImage::PNG16: {
       OBJDB_RETURN_IF_ERROR(needScale());
-      uint32_t w = 0, h = 0;
-      if (!pngSize(data, &w, &h)) {
-        return invalid(field + ".data", "is not a PNG file (PNG16 needs a 16-bit grey PNG)");
-      }
-      OBJDB_RETURN_IF_ERROR(checkSize(field + ".data (PNG)", w, h, intrinsics.width,
-                                      intrinsics.height, "the session's intrinsics"));
-      auto raw = io::decodeUint16Png(data, field + ".data");
-      if (!raw.ok()) return invalid(field, std::string(raw.status().message()));
+      auto raw = io::decodeUint16Png(data, field + ".data", intrinsics.width, intrinsics.height);
+      if (!raw.ok()) return raw.status();  // names frame.depth.data
       return fromRaw(*raw);
     }
     case v1::DepthImage::FLOAT32: {
@@ -231,12 +209,8 @@ StatusOr<ColorImage> decodeColor(const v1::ColorImage& color, int width, int hei
     }
     case v1::ColorImage::PNG:
     case v1::ColorImage::JPEG: {
-      auto image = io::decodeColorImage(data, field + ".data");
-      if (!image.ok()) return invalid(field, std::string(image.status().message()));
-      OBJDB_RETURN_IF_ERROR(checkSize(field + ".data (decoded)", uint32_t(image->width),
-                                      uint32_t(image->height), width, height,
-                                      "the depth image's sides"));
-      return image;
+      auto image = io::decodeColorImage(data, field + ".data", width, height);
+      return image;  // errors name frame.color.data
     }
     default:
       return invalid(field + ".encoding",

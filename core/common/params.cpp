@@ -46,7 +46,8 @@ Status TsdfParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(voxel_size_m, 0.001, 1.0, "tsdf.voxel_size_m"));
   OBJDB_RETURN_IF_ERROR(inRange(voxels_per_side, 2, 64, "tsdf.voxels_per_side"));
   OBJDB_RETURN_IF_ERROR(inRange(truncation_voxels, 1.0, 100.0, "tsdf.truncation_voxels"));
-  OBJDB_RETURN_IF_ERROR(positive(max_ray_length_m, "tsdf.max_ray_length_m"));
+  // No depth sensor measures beyond 100 m; longer rays only allocate blocks far away.
+  OBJDB_RETURN_IF_ERROR(inRange(max_ray_length_m, 0.01, 100.0, "tsdf.max_ray_length_m"));
   OBJDB_RETURN_IF_ERROR(inRange(min_ray_length_m, 0.0, max_ray_length_m, "tsdf.min_ray_length_m"));
   OBJDB_RETURN_IF_ERROR(positive(max_weight, "tsdf.max_weight"));
   return inRange(mesh_min_weight, 0.0, max_weight, "tsdf.mesh_min_weight");

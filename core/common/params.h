@@ -32,7 +32,7 @@ struct TsdfParams {
   float voxel_size_m = 0.02f;       // edge of a voxel
   int voxels_per_side = 8;          // block = voxels_per_side³ voxels
   float truncation_voxels = 3.0f;   // truncation distance in voxels
-  float max_ray_length_m = 3.5f;    // depth beyond this is skipped (counted)
+  float max_ray_length_m = 3.5f;    // depth beyond this is skipped (counted); 0.01..100 m
   float min_ray_length_m = 0.1f;    // depth below this is skipped (counted)
   float max_weight = 1000.0f;       // voxel weights saturate here
   float mesh_min_weight = 3.0f;     // voxels lighter than this are not meshed

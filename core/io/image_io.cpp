@@ -132,6 +132,21 @@ Status checkHeaderSize(const std::string& name, const HeaderInfo& info) {
                                                     kMaxImageSide));
 }
 
+// With an expected size (> 0), the header must announce exactly it: nothing else is decoded.
+Status checkExpectedSize(const std::string& name, const HeaderInfo& info, int width, int height) {
+  if (width <= 0) return absl::OkStatus();
+  if (info.width < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: its header does not tell its size (expected %dx%d)", name, width,
+                        height));
+  }
+  if (info.width != width || info.height != height) {
+    return absl::InvalidArgumentError(absl::StrFormat("%s is %dx%d pixels; expected %dx%d", name,
+                                                      info.width, info.height, width, height));
+  }
+  return absl::OkStatus();
+}
+
 StatusOr<cv::Mat> decode(std::string_view bytes, const std::string& name) {
   cv::Mat mat;
   try {
@@ -211,13 +226,15 @@ Status encodeAndWrite(const fs::path& path, const cv::Mat& mat) {
 
 }  // namespace
 
-StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name) {
+StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name,
+                                        int expect_width, int expect_height) {
   OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(bytes, name));
   if (header.format != FileFormat::kPng) {
     return absl::InvalidArgumentError(
         absl::StrCat(name, " is not a PNG file; expected a 16-bit single-channel PNG"));
   }
   OBJDB_RETURN_IF_ERROR(checkHeaderSize(name, header));
+  OBJDB_RETURN_IF_ERROR(checkExpectedSize(name, header, expect_width, expect_height));
   if (header.bit_depth != 16) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "%s is %d-bit; expected 16-bit single channel", name, header.bit_depth));
@@ -250,13 +267,15 @@ Status writeUint16Png(const fs::path& path, const Image<uint16_t>& image) {
   return encodeAndWrite(path, mat);
 }
 
-StatusOr<ColorImage> decodeColorImage(std::string_view bytes, const std::string& name) {
+StatusOr<ColorImage> decodeColorImage(std::string_view bytes, const std::string& name,
+                                      int expect_width, int expect_height) {
   OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(bytes, name));
   if (header.format == FileFormat::kOther) {
     return absl::InvalidArgumentError(
         absl::StrCat(name, " is neither PNG nor JPEG; expected an 8-bit colour image"));
   }
   OBJDB_RETURN_IF_ERROR(checkHeaderSize(name, header));
+  OBJDB_RETURN_IF_ERROR(checkExpectedSize(name, header, expect_width, expect_height));
   if (header.format == FileFormat::kPng && header.bit_depth > 8) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "%s is %d-bit; expected an 8-bit colour image", name, header.bit_depth));

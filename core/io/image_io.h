@@ -13,13 +13,16 @@ namespace objdb::io {
 // 16-bit single-channel PNG (depth in sensor units, or instance ids).
 StatusOr<RawDepthImage> readUint16Png(const std::filesystem::path& path);
 // The same from an encoded PNG in memory (a frame on the wire); `name` names it in errors. The
-// header's size is checked before anything is decoded.
-StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name);
+// header's size is checked before anything is decoded: at most kMaxImageSide per side, and with
+// expect_width > 0 exactly expect_width × expect_height.
+StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name,
+                                        int expect_width = 0, int expect_height = 0);
 Status writeUint16Png(const std::filesystem::path& path, const Image<uint16_t>& image);
 
 // 8-bit colour image (PNG or JPEG, 3 channels; grey images are expanded), RGB order.
 StatusOr<ColorImage> readColorImage(const std::filesystem::path& path);
-StatusOr<ColorImage> decodeColorImage(std::string_view bytes, const std::string& name);
+StatusOr<ColorImage> decodeColorImage(std::string_view bytes, const std::string& name,
+                                      int expect_width = 0, int expect_height = 0);
 Status writeColorPng(const std::filesystem::path& path, const ColorImage& image);
 
 }  // namespace objdb::io

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <future>
 #include <memory>
 #include <string>
 #include <thread>
@@ -14,6 +15,8 @@
 #include "core/common/params.h"
 #include "core/database/object_database.h"
 #include "core/gsm/gsm.h"
+#include "core/io/image_io.h"
+#include "core/io/io_util.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "core/sim/generator.h"
 #include "core/sim/lounge.h"
@@ -463,6 +466,8 @@ TEST(ObjectDatabaseService, BadHeadersEndTheStreamWithTheCodeAndTheField) {
       {{header("s", r.intrinsics, "{\"tsdf\": {\"voxel_size_m\": 0.01}}")},
        grpc::StatusCode::INVALID_ARGUMENT, "tsdf.voxel_size_m"},
       {{header("s", r.intrinsics, "not json")}, grpc::StatusCode::INVALID_ARGUMENT, "params_json"},
+      {{header("s", r.intrinsics, "{\"tsdf\": {\"max_ray_length_m\": 1e6}}")},
+       grpc::StatusCode::INVALID_ARGUMENT, "tsdf.max_ray_length_m"},
       {{header("twice", r.intrinsics), header("twice", r.intrinsics)},
        grpc::StatusCode::FAILED_PRECONDITION, "second SessionHeader"},
   };
@@ -528,6 +533,19 @@ TEST(ObjectDatabaseService, BadFramesAreRejectedInTheirAckAndTheSessionCarriesOn
   f = frame(r, 1);
   f.mutable_frame()->mutable_color()->set_encoding(v1::ColorImage::JPEG);
   add(f, "frame.color");
+  // A PNG of another size is refused from its header, before it is decoded.
+  {
+    testing::TempDir png_dir;
+    ASSERT_TRUE(io::writeColorPng(png_dir / "small.png", ColorImage(8, 8, Rgb8{1, 2, 3})).ok());
+    f = frame(r, 1);
+    f.mutable_frame()->mutable_color()->set_encoding(v1::ColorImage::PNG);
+    f.mutable_frame()->mutable_color()->set_data(
+        io::internal::readFile(png_dir / "small.png").value());
+    add(f, "frame.color.data is 8x8 pixels; expected 224x172");
+  }
+  f = frame(r, 1);
+  f.mutable_frame()->mutable_t_world_camera()->set_x(1e7);
+  add(f, "from the world origin");
   // Indices and timestamps must grow.
   requests.push_back(frame(r, 0));  // frame 0 again
   expected.push_back("frame.index 0 is not above the previous frame's 0");
@@ -583,23 +601,20 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << end.error_message();
   EXPECT_NE(end.error_message().find("stream open"), std::string::npos) << end.error_message();
 
-  // The client goes away: the session is interrupted, its map kept, and EndSession flushes it.
+  // The client goes away: the session is interrupted, its map kept, and EndSession flushes it —
+  // at once if the server has seen the cancel, else after "stream open" until it has.
   context.TryCancel();
   EXPECT_FALSE(stream->Finish().ok());
-  v1::ListSessionsResponse sessions;
   for (int attempt = 0; attempt < 200; ++attempt) {
-    grpc::ClientContext list_context;
-    setDeadline(&list_context);
-    ASSERT_TRUE(stub->ListSessions(&list_context, v1::ListSessionsRequest(), &sessions).ok());
-    if (sessions.sessions(0).state() == v1::SESSION_STATE_INTERRUPTED) break;
+    end = endSession(*stub, "tuesday", &ended);
+    if (end.error_code() != grpc::StatusCode::FAILED_PRECONDITION) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
-  EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_INTERRUPTED);
-  end = endSession(*stub, "tuesday", &ended);
   ASSERT_TRUE(end.ok()) << end.error_message();
   EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
   EXPECT_EQ(ended.summary().counters().frames_integrated(), 12u);
   EXPECT_GT(ended.summary().object_ids_size(), 0);
+  v1::ListSessionsResponse sessions;
 
   // A session still open when the server stops loses its map: interrupted after the restart,
   // and EndSession says why it cannot flush it.
@@ -627,6 +642,22 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   v1::MeshChunk chunk;
   EXPECT_FALSE(reader->Read(&chunk));
   EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+TEST(ObjectDatabaseService, AShutdownEndsStreamsThatNeverSentTheirHeader) {
+  ServerOptions options = loopbackOptions();
+  options.drain_deadline = std::chrono::milliseconds(200);
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  grpc::ClientContext context;
+  setDeadline(&context);
+  auto stream = stub->Ingest(&context);  // and nothing sent
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  // The drain cancels the call; the server must still end it, or its shutdown never returns.
+  auto stopped = std::async(std::launch::async, [&] { server->shutdown(); });
+  ASSERT_EQ(stopped.wait_for(std::chrono::seconds(30)), std::future_status::ready);
+  EXPECT_FALSE(stream->Finish().ok());
 }
 
 TEST(ObjectDatabaseService, PageTokensAreCheckedAgainstTheirListing) {
