@@ -49,6 +49,7 @@ Status TsdfParams::validate() const {
   // No depth sensor measures beyond 100 m; longer rays only allocate blocks far away.
   OBJDB_RETURN_IF_ERROR(inRange(max_ray_length_m, 0.01, 100.0, "tsdf.max_ray_length_m"));
   OBJDB_RETURN_IF_ERROR(inRange(min_ray_length_m, 0.0, max_ray_length_m, "tsdf.min_ray_length_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(carve_distance_m, 0.0, 2.0, "tsdf.carve_distance_m"));
   OBJDB_RETURN_IF_ERROR(positive(max_weight, "tsdf.max_weight"));
   return inRange(mesh_min_weight, 0.0, max_weight, "tsdf.mesh_min_weight");
 }

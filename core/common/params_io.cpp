@@ -34,6 +34,7 @@ void forEachField(TsdfParams& p, Fn&& fn) {
   fn("min_ray_length_m", p.min_ray_length_m);
   fn("max_weight", p.max_weight);
   fn("mesh_min_weight", p.mesh_min_weight);
+  fn("carve_distance_m", p.carve_distance_m);
 }
 template <typename Fn>
 void forEachField(GsmParams& p, Fn&& fn) {

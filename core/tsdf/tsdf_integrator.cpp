@@ -55,6 +55,8 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   BlockIndex last(INT32_MIN, INT32_MIN, INT32_MIN);
   const Eigen::Vector3f origin = T_wc.translation();
   const float step = layer->voxelSize();
+  const float carve = params_.carve_distance_m;
+  const float carve_step = 0.5f * layer->voxelSize() * float(layer->voxelsPerSide());
   for (int v = 0; v < h; ++v) {
     for (int u = 0; u < w; ++u) {
       const float z = depth.data[size_t(v) * w + u];
@@ -76,6 +78,18 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
         if (b != last) {
           touched.insert(b);
           last = b;
+        }
+      }
+      // Free space in front of the band (every 4th pixel each way, half-block steps: the
+      // samples of neighbouring rays are far closer than a block).
+      if (carve > 0.0f && ((u | v) & 3) == 0) {
+        const float reach = std::min(trunc + carve, (p - origin).norm() - params_.min_ray_length_m);
+        for (float s = trunc + carve_step; s <= reach + 1e-6f; s += carve_step) {
+          const BlockIndex b = layer->blockIndexOf(p - s * ray);
+          if (b != last) {
+            touched.insert(b);
+            last = b;
+          }
         }
       }
     }

@@ -51,6 +51,33 @@ TEST(TsdfIntegrator, FrontalPlaneMatchesAnalyticSignedDistance) {
   EXPECT_NEAR(d, 0.01f, 1e-5f);
 }
 
+TEST(TsdfIntegrator, CarvingObservesTheFreeSpaceInFrontOfTheBand) {
+  const Intrinsics k = Intrinsics::vga();
+  TsdfParams params = params2cm();
+  const DepthImage depth(k.width, k.height, 2.0f);  // a wall 2 m in front of the camera
+  auto observedAt = [&](float carve, float z, float* distance) {
+    params.carve_distance_m = carve;
+    TsdfLayer layer = TsdfLayer::create(params.voxel_size_m, params.voxels_per_side).value();
+    EXPECT_TRUE(
+        TsdfIntegrator::create(params, k).value().integrate(depth, Transform::Identity(), &layer).ok());
+    const TsdfVoxel* voxel = layer.voxel(layer.voxelIndexOf({0.0f, 0.0f, z}));
+    if (voxel == nullptr || !(voxel->weight > 0.0f)) return false;
+    *distance = voxel->distance;
+    return true;
+  };
+  const float trunc = params.truncationDistance();
+  float d = 0.0f;
+  // Without carving, 30 cm in front of the wall lies outside every allocated block.
+  EXPECT_FALSE(observedAt(0.0f, 1.7f, &d));
+  // With 40 cm of carving it is observed as free space, and nothing moves at the wall.
+  ASSERT_TRUE(observedAt(0.4f, 1.7f, &d));
+  EXPECT_NEAR(d, trunc, 1e-6f);
+  ASSERT_TRUE(observedAt(0.4f, 1.99f, &d));
+  EXPECT_NEAR(d, 0.01f, 1e-5f);
+  // Beyond the carving distance (and the block it ends in) nothing is allocated.
+  EXPECT_FALSE(observedAt(0.4f, 1.0f, &d));
+}
+
 TEST(TsdfIntegrator, SphereSeenFromAroundMatchesItsSignedDistance) {
   const Intrinsics k = Intrinsics::vga();
   const TsdfParams params = params2cm();
