@@ -38,7 +38,8 @@ TEST(ObjdbCli, HelpListsEverySubcommandAndExitsZero) {
     EXPECT_EQ(result.exit_code, 0) << help << "\n" << result.err;
     EXPECT_TRUE(contains(result.out, "usage: objdb <command>")) << result.out;
     for (const char* command :
-         {"\n  health ", "\n  sim ", "\n  info ", "\n  segment ", "\n  help "}) {
+         {"\n  health ", "\n  sim ", "\n  info ", "\n  segment ", "\n  fuse ", "\n  gsm ",
+          "\n  ingest ", "\n  db ", "\n  stream ", "\n  remote ", "\n  help "}) {
       EXPECT_TRUE(contains(result.out, command)) << command << " missing in\n" << result.out;
     }
   }

@@ -23,6 +23,7 @@
 #include "core/sim/renderer.h"
 #include "core/sim/scene.h"
 #include "objdb/v1/objdb.grpc.pb.h"
+#include "server/proto_convert.h"
 #include "server/server.h"
 #include "tests/support/temp_dir.h"
 
@@ -95,19 +96,6 @@ const Recording& twoBoxes() {
   return recording;
 }
 
-v1::Pose poseOf(const Transform& T) {
-  const TumPose p = tumPoseFromTransform(T, 0.0);
-  v1::Pose out;
-  out.set_x(p.t.x());
-  out.set_y(p.t.y());
-  out.set_z(p.t.z());
-  out.set_qx(p.q_xyzw[0]);
-  out.set_qy(p.q_xyzw[1]);
-  out.set_qz(p.q_xyzw[2]);
-  out.set_qw(p.q_xyzw[3]);
-  return out;
-}
-
 v1::IngestRequest header(const std::string& name, const Intrinsics& in,
                          const std::string& params_json = "") {
   v1::IngestRequest request;
@@ -115,13 +103,7 @@ v1::IngestRequest header(const std::string& name, const Intrinsics& in,
   h.set_session_name(name);
   h.set_client_info("object_database_service_test");
   h.set_params_json(params_json);
-  v1::Intrinsics& i = *h.mutable_intrinsics();
-  i.set_width(uint32_t(in.width));
-  i.set_height(uint32_t(in.height));
-  i.set_fx(in.fx);
-  i.set_fy(in.fy);
-  i.set_cx(in.cx);
-  i.set_cy(in.cy);
+  *h.mutable_intrinsics() = server::toProto(in);
   return request;
 }
 
@@ -131,7 +113,7 @@ v1::IngestRequest frame(const Recording& r, size_t k) {
   v1::Frame& f = *request.mutable_frame();
   f.set_index(k);
   f.set_timestamp_s(double(k) / 30.0);
-  *f.mutable_t_world_camera() = poseOf(r.poses[k]);
+  *f.mutable_t_world_camera() = server::toProto(r.poses[k]);
   v1::DepthImage& d = *f.mutable_depth();
   d.set_width(uint32_t(r.intrinsics.width));
   d.set_height(uint32_t(r.intrinsics.height));
