@@ -39,6 +39,8 @@ options:
   --print-config          print the effective parameters (defaults + --config) as JSON, exit
   --max-message-mib N     largest gRPC message received or sent, MiB, 1..1024 (default %d)
   --drain-deadline-ms N   on shutdown, time calls in flight get to finish (default %d)
+  --max-sessions N        sessions whose map is in memory at once (streaming, or not ended yet),
+                          1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 
@@ -46,7 +48,8 @@ exit status: 0 after a clean shutdown, 1 if the server cannot start (bad configu
 in use), 2 on a command-line error.
 )",
       defaults.listen_address, defaults.db_path, defaults.max_receive_message_bytes >> 20,
-      static_cast<int>(defaults.drain_deadline.count()));
+      static_cast<int>(defaults.drain_deadline.count()), objdb::kMaxOpenSessions,
+      defaults.max_open_sessions);
 }
 
 struct CommandLine {
@@ -120,6 +123,8 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       int ms = 0;
       if (!take_int(0, static_cast<int>(objdb::kMaxDrainDeadline.count()), &ms)) return false;
       cli->options.drain_deadline = std::chrono::milliseconds(ms);
+    } else if (arg == "--max-sessions") {
+      if (!take_int(1, objdb::kMaxOpenSessions, &cli->options.max_open_sessions)) return false;
     } else if (arg == "--log-level") {
       if (!take_value(&cli->log_level)) return false;
     } else {

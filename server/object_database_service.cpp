@@ -450,6 +450,17 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
 
   std::lock_guard lock(mutex_);
   if (stopped_) return absl::UnavailableError("the server is shutting down");
+  size_t open = 0;
+  for (const auto& [name, live] : sessions_) {
+    std::lock_guard live_lock(live->mutex);
+    open += live->state != v1::SESSION_STATE_ENDED ? 1 : 0;
+  }
+  if (open >= options_.max_open_sessions) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "too many sessions with a map in memory (%d): end some with EndSession, or start the "
+        "server with a larger --max-sessions",
+        open));
+  }
   storage::SessionInfo info;
   info.name = session->name;
   info.intrinsics_json = intrinsicsToJson(session->intrinsics);

@@ -45,6 +45,7 @@ struct RawSegmentJob;
 struct ServiceOptions {
   Params params;                    // the server's parameters; sessions may override some
   size_t frame_queue = 8;           // frames buffered per stream before reading pauses
+  size_t max_open_sessions = 16;    // sessions with a map in memory; more: RESOURCE_EXHAUSTED
   size_t segment_queue = 64;        // segments waiting for the database before frame work waits
   int integration_threads = 2;      // TSDF integration threads per session
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size

@@ -110,6 +110,10 @@ Status ServerOptions::validate() const {
                         static_cast<int64_t>(drain_deadline.count()),
                         static_cast<int64_t>(kMaxDrainDeadline.count())));
   }
+  if (max_open_sessions < 1 || max_open_sessions > kMaxOpenSessions) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "max_open_sessions is %d, must be in [1, %d]", max_open_sessions, kMaxOpenSessions));
+  }
   if (frame_queue < 1 || frame_queue > 1024) {
     return absl::InvalidArgumentError(
         absl::StrFormat("frame_queue is %d frames, must be in [1, 1024]", frame_queue));
@@ -127,6 +131,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   server::ServiceOptions service_options;
   service_options.params = options.params;
   service_options.frame_queue = size_t(options.frame_queue);
+  service_options.max_open_sessions = size_t(options.max_open_sessions);
   service_options.max_send_message_bytes = size_t(options.max_send_message_bytes);
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<server::ObjectDatabaseService> service,
                          server::ObjectDatabaseService::create(service_options, store.get()));

@@ -54,6 +54,9 @@ struct ServerOptions {
   Params params;
   // Frames buffered per Ingest stream before the server stops reading it (backpressure).
   int frame_queue = 8;
+  // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a
+  // room at 2 cm). One more Ingest is refused with RESOURCE_EXHAUSTED.
+  int max_open_sessions = 16;
 
   // Checks every field; the message names the field and the bad value.
   Status validate() const;
@@ -66,6 +69,7 @@ inline constexpr char kObjectDatabaseServiceName[] = "objdb.v1.ObjectDatabase";
 inline constexpr int kMinMessageBytes = 4 * 1024;
 inline constexpr int kMaxMessageBytes = 1024 * 1024 * 1024;
 inline constexpr std::chrono::milliseconds kMaxDrainDeadline{10 * 60 * 1000};
+inline constexpr int kMaxOpenSessions = 1024;
 
 // A running server. Thread-safe; shutdown() may be called from any thread, any number of times.
 class ObjdbServer {

@@ -25,6 +25,7 @@
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "server/proto_convert.h"
 #include "server/server.h"
+#include "tests/storage/store_fixtures.h"
 #include "tests/support/temp_dir.h"
 
 namespace objdb {
@@ -558,6 +559,23 @@ TEST(ObjectDatabaseService, BadFramesAreRejectedInTheirAckAndTheSessionCarriesOn
   EXPECT_EQ(acks.back().session().frames_rejected(), expected.size());
   EXPECT_EQ(acks.back().session().frames_integrated(), 2u);
   EXPECT_EQ(acks.back().session().frames_received(), requests.size() - 1);
+
+  // The map is as if the bad frames had never been sent: the same two good frames alone give
+  // the same stored scene, voxel for voxel, and the same labels.
+  const std::vector<v1::IngestRequest> good = {header("good-frames", r.intrinsics), requests[1],
+                                               requests.back()};
+  ASSERT_TRUE(ingest(*stub, good).status.ok());
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "bad-frames", &ended).ok());
+  ASSERT_TRUE(endSession(*stub, "good-frames", &ended).ok());
+  const auto with_bad = server->store().scene("bad-frames").value();
+  const auto without = server->store().scene("good-frames").value();
+  ASSERT_NE(with_bad, nullptr);
+  ASSERT_NE(without, nullptr);
+  EXPECT_GT(without->numObservedVoxels(), 1000u);
+  EXPECT_EQ(testing::diffLayers(*with_bad, *without), "");
+  EXPECT_TRUE(*server->store().sceneLabels("bad-frames").value() ==
+              *server->store().sceneLabels("good-frames").value());
 }
 
 TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOne) {
@@ -640,6 +658,25 @@ TEST(ObjectDatabaseService, AShutdownEndsStreamsThatNeverSentTheirHeader) {
   auto stopped = std::async(std::launch::async, [&] { server->shutdown(); });
   ASSERT_EQ(stopped.wait_for(std::chrono::seconds(30)), std::future_status::ready);
   EXPECT_FALSE(stream->Finish().ok());
+}
+
+TEST(ObjectDatabaseService, SessionsBeyondTheLimitAreRefusedUntilOneEnds) {
+  ServerOptions options = loopbackOptions();
+  options.max_open_sessions = 1;
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  ASSERT_TRUE(ingest(*stub, session("first", 2)).status.ok());
+  // "first" is not ended: its map still holds the only place.
+  IngestResult second = ingest(*stub, session("second", 2));
+  EXPECT_EQ(second.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(second.status.error_message().find("too many sessions with a map in memory (1)"),
+            std::string::npos)
+      << second.status.error_message();
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "first", &ended).ok());
+  second = ingest(*stub, session("second", 2));
+  EXPECT_TRUE(second.status.ok()) << second.status.error_message();
 }
 
 TEST(ObjectDatabaseService, PageTokensAreCheckedAgainstTheirListing) {
