@@ -25,14 +25,23 @@
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "server/proto_convert.h"
 #include "server/server.h"
+#include "tests/server/ingest_fixtures.h"
 #include "tests/storage/store_fixtures.h"
 #include "tests/support/temp_dir.h"
 
 namespace objdb {
 namespace {
 
-constexpr auto kCallDeadline = std::chrono::seconds(120);
-constexpr double kMetresPerUnit = 0.001;
+using testing::endSession;
+using testing::frame;
+using testing::header;
+using testing::ingest;
+using testing::IngestResult;
+using testing::kMetresPerUnit;
+using testing::Recording;
+using testing::session;
+using testing::setDeadline;
+using testing::twoBoxes;
 
 std::string scratchDbPath() {
   static testing::TempDir dir;
@@ -62,131 +71,6 @@ std::unique_ptr<v1::ObjectDatabase::Stub> stubFor(const ObjdbServer& server) {
       server.address(), grpc::InsecureChannelCredentials(), arguments));
 }
 
-void setDeadline(grpc::ClientContext* context) {
-  context->set_deadline(std::chrono::system_clock::now() + kCallDeadline);
-}
-
-// Two boxes on a floor seen by the Tango camera: depth in millimetres (as a sensor sends it) and
-// colour, rendered once.
-struct Recording {
-  Intrinsics intrinsics;
-  std::vector<RawDepthImage> depth;
-  std::vector<ColorImage> color;
-  std::vector<Transform> poses;
-};
-
-const Recording& twoBoxes() {
-  static const Recording recording = [] {
-    Recording r;
-    const sim::Scene scene = sim::twoBoxesScene("tango", 40);
-    auto built = sim::buildScene(scene);
-    auto poses = sim::sampleTrajectory(scene.trajectory);
-    EXPECT_TRUE(built.ok() && poses.ok());
-    const sim::Renderer renderer(scene.intrinsics);
-    r.intrinsics = scene.intrinsics;
-    for (size_t i = 0; i < poses->size(); ++i) {
-      const Frame frame = sim::renderFrame(scene, *built, renderer, (*poses)[i], i, true);
-      auto raw = depthToRaw(frame.depth, kMetresPerUnit);
-      EXPECT_TRUE(raw.ok());
-      r.depth.push_back(*raw);
-      r.color.push_back(*frame.color);
-      r.poses.push_back(frame.T_world_camera);
-    }
-    return r;
-  }();
-  return recording;
-}
-
-v1::IngestRequest header(const std::string& name, const Intrinsics& in,
-                         const std::string& params_json = "") {
-  v1::IngestRequest request;
-  v1::SessionHeader& h = *request.mutable_header();
-  h.set_session_name(name);
-  h.set_client_info("object_database_service_test");
-  h.set_params_json(params_json);
-  *h.mutable_intrinsics() = server::toProto(in);
-  return request;
-}
-
-// Frame k of the recording; UINT16 depth (little-endian millimetres) and RGB8 colour.
-v1::IngestRequest frame(const Recording& r, size_t k) {
-  v1::IngestRequest request;
-  v1::Frame& f = *request.mutable_frame();
-  f.set_index(k);
-  f.set_timestamp_s(double(k) / 30.0);
-  *f.mutable_t_world_camera() = server::toProto(r.poses[k]);
-  v1::DepthImage& d = *f.mutable_depth();
-  d.set_width(uint32_t(r.intrinsics.width));
-  d.set_height(uint32_t(r.intrinsics.height));
-  d.set_encoding(v1::DepthImage::UINT16);
-  d.set_metres_per_unit(kMetresPerUnit);
-  std::string bytes(r.depth[k].data.size() * 2, '\0');
-  for (size_t i = 0; i < r.depth[k].data.size(); ++i) {
-    bytes[2 * i] = char(r.depth[k].data[i] & 0xFF);
-    bytes[2 * i + 1] = char(r.depth[k].data[i] >> 8);
-  }
-  d.set_data(bytes);
-  v1::ColorImage& c = *f.mutable_color();
-  c.set_width(uint32_t(r.intrinsics.width));
-  c.set_height(uint32_t(r.intrinsics.height));
-  c.set_encoding(v1::ColorImage::RGB8);
-  c.set_data(std::string(reinterpret_cast<const char*>(r.color[k].data.data()),
-                         r.color[k].data.size() * 3));
-  return request;
-}
-
-struct IngestResult {
-  grpc::Status status;
-  std::vector<v1::IngestResponse> responses;
-  std::vector<v1::FrameAck> acks() const {
-    std::vector<v1::FrameAck> out;
-    for (const auto& r : responses) {
-      if (r.has_ack()) out.push_back(r.ack());
-    }
-    return out;
-  }
-  size_t count(v1::IngestResponse::EventCase kind) const {
-    size_t n = 0;
-    for (const auto& r : responses) n += r.event_case() == kind ? 1 : 0;
-    return n;
-  }
-};
-
-// Writes `requests`, half-closes, reads every response (on a second thread, so that the
-// server's backpressure cannot stall the writer) and returns the stream's status.
-IngestResult ingest(v1::ObjectDatabase::Stub& stub, const std::vector<v1::IngestRequest>& requests) {
-  grpc::ClientContext context;
-  setDeadline(&context);
-  auto stream = stub.Ingest(&context);
-  IngestResult result;
-  std::thread reader([&] {
-    v1::IngestResponse response;
-    while (stream->Read(&response)) result.responses.push_back(response);
-  });
-  for (const auto& r : requests) {
-    if (!stream->Write(r)) break;
-  }
-  stream->WritesDone();
-  reader.join();
-  result.status = stream->Finish();
-  return result;
-}
-
-std::vector<v1::IngestRequest> session(const std::string& name, size_t frames) {
-  const Recording& r = twoBoxes();
-  std::vector<v1::IngestRequest> requests = {header(name, r.intrinsics)};
-  for (size_t k = 0; k < frames; ++k) requests.push_back(frame(r, k));
-  return requests;
-}
-
-grpc::Status endSession(v1::ObjectDatabase::Stub& stub, const std::string& name,
-                        v1::EndSessionResponse* response) {
-  grpc::ClientContext context;
-  setDeadline(&context);
-  v1::EndSessionRequest request;
-  request.set_session_name(name);
-  return stub.EndSession(&context, request, response);
-}
 
 std::vector<v1::ObjectSummary> listObjects(v1::ObjectDatabase::Stub& stub,
                                            const std::string& session = "",

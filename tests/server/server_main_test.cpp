@@ -13,6 +13,7 @@
 #include <string>
 
 #include "grpc/health/v1/health.grpc.pb.h"
+#include "tests/server/ingest_fixtures.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"
 
@@ -20,6 +21,7 @@ namespace objdb {
 namespace {
 
 using testing::ChildProcess;
+using testing::listeningAddress;
 using testing::ProcessResult;
 using testing::runProcess;
 using testing::TempDir;
@@ -40,16 +42,6 @@ grpc::Status checkHealth(const std::string& address,
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
   return stub->Check(&context, grpc::health::v1::HealthCheckRequest(), response);
-}
-
-// "... listening on 127.0.0.1:43121" → "127.0.0.1:43121", or "" if absent.
-std::string listeningAddress(const std::string& log) {
-  const size_t at = log.find(kListening);
-  if (at == std::string::npos) return "";
-  size_t end = at + std::string(kListening).size();
-  while (end < log.size() && std::isdigit(static_cast<unsigned char>(log[end]))) ++end;
-  return log.substr(at + std::string("listening on ").size(),
-                    end - at - std::string("listening on ").size());
 }
 
 TEST(ObjdbServerBinary, HelpPrintsUsageAndExitsZero) {
