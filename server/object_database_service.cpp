@@ -1091,10 +1091,12 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
       }
       TriangleMesh mesh;
       if (completed) {
-        OBJDB_ASSIGN_OR_RETURN(const tsdf::TsdfLayer full,
-                               completion::completeScene(*store_, name, options_.params.merging,
-                                                         params.tsdf.max_weight, nullptr));
-        if (context->IsCancelled()) return absl::CancelledError("GetSceneMesh was cancelled");
+        // A deadline or a cancel stops the work between models.
+        OBJDB_ASSIGN_OR_RETURN(
+            const tsdf::TsdfLayer full,
+            completion::completeScene(*store_, name, options_.params.merging,
+                                      params.tsdf.max_weight, nullptr,
+                                      [context] { return context->IsCancelled(); }));
         mesh = tsdf::extractMesh(full, params.tsdf.mesh_min_weight);
       } else {
         mesh = tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight);

@@ -1,5 +1,7 @@
 #include "core/completion/scene_completion.h"
 
+#include <algorithm>
+
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_format.h"
 #include "core/common/grid_key.h"
@@ -29,7 +31,8 @@ std::vector<tsdf::VoxelIndex> objectRegion(const model::ObjectModel& model, int 
 
 StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
                                         const std::string& session, const MergingParams& merging,
-                                        float max_weight, CompletionReport* report) {
+                                        float max_weight, CompletionReport* report,
+                                        const std::function<bool()>& cancelled) {
   OBJDB_RETURN_IF_ERROR(merging.validate());
   OBJDB_ASSIGN_OR_RETURN(const auto scene, store.scene(session));
   if (scene == nullptr) {
@@ -41,8 +44,21 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
   CompletionReport local;
   CompletionReport& out = report ? *report : local;
   out = {};
-  OBJDB_ASSIGN_OR_RETURN(const std::vector<int64_t> ids, store.modelIds());
-  for (int64_t id : ids) {
+  // Which models to load: built from >= 2 segments, one of them of this session (the prefilter's
+  // entries say so without decoding grids).
+  OBJDB_ASSIGN_OR_RETURN(const database::MatchEntries entries, store.matchEntries());
+  std::vector<int64_t> ids;
+  for (const auto& e : entries.entries) {
+    const bool here = std::any_of(e.segments.begin(), e.segments.end(),
+                                  [&](const database::SegmentKey& k) { return k.session == session; });
+    if (e.segments.size() >= 2 && here) ids.push_back(e.id);
+  }
+  for (size_t done = 0; done < ids.size(); ++done) {
+    if (cancelled && cancelled()) {
+      return absl::CancelledError(absl::StrFormat(
+          "completion of session %s cancelled after %d of %d models", session, done, ids.size()));
+    }
+    const int64_t id = ids[done];
     OBJDB_ASSIGN_OR_RETURN(auto model, store.model(id));
     if (model->observations.size() < 2) continue;
     std::vector<tsdf::VoxelIndex> region;  // built on the first verified placement

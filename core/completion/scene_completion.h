@@ -5,6 +5,8 @@
 // What the scene measured is kept: completion adds, it does not overwrite.
 #pragma once
 
+#include <functional>
+
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -38,8 +40,10 @@ struct CompletionReport {
 // The models observed in `session` (every observation of every stored model), completed into a
 // copy of the session's scene map. Models built from a single segment add nothing (they are the
 // scene's own data) and are skipped. Errors: the session has no scene map in the store.
+// `cancelled`, when given, is asked before each model: true ends the work with CANCELLED.
 StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
                                         const std::string& session, const MergingParams& merging,
-                                        float max_weight, CompletionReport* report);
+                                        float max_weight, CompletionReport* report,
+                                        const std::function<bool()>& cancelled = {});
 
 }  // namespace objdb::completion

@@ -74,6 +74,17 @@ TEST(CompleteScene, FillsTheSideOfAnObjectThatOnlyAnotherSessionSaw) {
   ASSERT_TRUE(scene->interpolateDistance(front_world, &before));
   ASSERT_TRUE(completed->interpolateDistance(front_world, &after));
   EXPECT_EQ(before, after);
+
+  // Asked to stop, it stops before the model and says how far it got.
+  size_t asked = 0;
+  auto stopped = completeScene(f.store, "monday", params().merging, 1000.0f, &report, [&] {
+    ++asked;
+    return true;
+  });
+  ASSERT_FALSE(stopped.ok());
+  EXPECT_EQ(stopped.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_THAT(std::string(stopped.status().message()), HasSubstr("after 0 of 1 models"));
+  EXPECT_EQ(asked, 1u);
 }
 
 // A segment's grid also holds the band of whatever stood near the object (here a plate beside it
