@@ -371,7 +371,12 @@ void ObjectDatabaseService::stop() {
 }
 
 void ObjectDatabaseService::startWorker(std::function<void()> work) {
-  std::lock_guard lock(mutex_);
+  std::unique_lock lock(mutex_);
+  if (stopped_) {  // no call can arrive after stop(); should one, it still gets its answer
+    lock.unlock();
+    work();
+    return;
+  }
   // Join the workers that are done.
   for (auto it = workers_.begin(); it != workers_.end();) {
     if (it->finished->load()) {
@@ -395,8 +400,26 @@ std::shared_ptr<LiveSession> ObjectDatabaseService::liveSession(const std::strin
   return it == sessions_.end() ? nullptr : it->second;
 }
 
+Status ObjectDatabaseService::checkSessionLimit() {
+  size_t open = 0;
+  for (const auto& [name, live] : sessions_) {
+    std::lock_guard live_lock(live->mutex);
+    open += live->state != v1::SESSION_STATE_ENDED ? 1 : 0;
+  }
+  if (open < options_.max_open_sessions) return absl::OkStatus();
+  return absl::ResourceExhaustedError(absl::StrFormat(
+      "too many sessions with a map in memory (%d): end some with EndSession, or start the "
+      "server with a larger --max-sessions",
+      open));
+}
+
 StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
-    const v1::SessionHeader& header) {
+    const v1::SessionHeader& header, const std::shared_ptr<IngestStream>& stream) {
+  {
+    // Refused before a map is built (checked again when the session is published).
+    std::lock_guard lock(mutex_);
+    OBJDB_RETURN_IF_ERROR(checkSessionLimit());
+  }
   OBJDB_RETURN_IF_ERROR(checkSessionName(header.session_name()));
   if (header.client_info().size() > kMaxClientInfo) {
     return absl::InvalidArgumentError(absl::StrFormat(
@@ -450,17 +473,7 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
 
   std::lock_guard lock(mutex_);
   if (stopped_) return absl::UnavailableError("the server is shutting down");
-  size_t open = 0;
-  for (const auto& [name, live] : sessions_) {
-    std::lock_guard live_lock(live->mutex);
-    open += live->state != v1::SESSION_STATE_ENDED ? 1 : 0;
-  }
-  if (open >= options_.max_open_sessions) {
-    return absl::ResourceExhaustedError(absl::StrFormat(
-        "too many sessions with a map in memory (%d): end some with EndSession, or start the "
-        "server with a larger --max-sessions",
-        open));
-  }
+  OBJDB_RETURN_IF_ERROR(checkSessionLimit());
   storage::SessionInfo info;
   info.name = session->name;
   info.intrinsics_json = intrinsicsToJson(session->intrinsics);
@@ -468,6 +481,7 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
   // ALREADY_EXISTS when the database has a session of that name.
   OBJDB_RETURN_IF_ERROR(store_->beginSession(info).status());
   session->started_unix_s = nowUnixSeconds();
+  session->stream = stream;  // before it is published: EndSession looks at the stream
   sessions_[session->name] = session;
   logger("server")->info("session {} opened ({}x{}, client \"{}\")", session->name,
                          session->intrinsics.width, session->intrinsics.height,
@@ -479,9 +493,13 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
   v1::SessionHeader header;
   {
     std::lock_guard lock(stream->mutex);
+    if (stream->cancelled) {  // gone before its session existed: nothing to open
+      stream->finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
+      return;
+    }
     header = stream->header;
   }
-  auto opened = openSession(header);
+  auto opened = openSession(header, stream);
   if (!opened.ok()) {
     std::lock_guard lock(stream->mutex);
     stream->cancelled = true;
@@ -493,10 +511,6 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
     stream->session = *opened;
   }
   LiveSession& session = **opened;
-  {
-    std::lock_guard lock(session.mutex);
-    session.stream = stream;
-  }
   bool ended_cleanly = false;
   while (true) {
     v1::Frame frame;

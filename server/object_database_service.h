@@ -92,7 +92,12 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
                         std::unique_ptr<database::ObjectDatabase> db);
 
   // Ingest.
-  StatusOr<std::shared_ptr<LiveSession>> openSession(const v1::SessionHeader& header);
+  // Checks the header, builds the session's segmenter and map, stores the session as open and
+  // publishes it (with its stream). Errors: the header's, ALREADY_EXISTS, RESOURCE_EXHAUSTED.
+  StatusOr<std::shared_ptr<LiveSession>> openSession(const v1::SessionHeader& header,
+                                                     const std::shared_ptr<IngestStream>& stream);
+  // RESOURCE_EXHAUSTED when max_open_sessions sessions are not ended (mutex_ held).
+  Status checkSessionLimit();
   void startWorker(std::function<void()> work);
   void runStream(std::shared_ptr<IngestStream> stream);
   // The frame worker is done with the session's map: hands EndSession jobs that waited for it to

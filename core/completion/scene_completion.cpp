@@ -47,6 +47,8 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
   // Which models to load: built from >= 2 segments, one of them of this session (the prefilter's
   // entries say so without decoding grids).
   OBJDB_ASSIGN_OR_RETURN(const database::MatchEntries entries, store.matchEntries());
+  // A model that cannot be read might be one of this session's: say so rather than leave it out.
+  if (!entries.skipped.empty()) return entries.skipped.front();
   std::vector<int64_t> ids;
   for (const auto& e : entries.entries) {
     const bool here = std::any_of(e.segments.begin(), e.segments.end(),

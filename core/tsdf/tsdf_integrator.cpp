@@ -84,7 +84,10 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
       // samples of neighbouring rays are far closer than a block).
       if (carve > 0.0f && ((u | v) & 3) == 0) {
         const float reach = std::min(trunc + carve, (p - origin).norm() - params_.min_ray_length_m);
-        for (float s = trunc + carve_step; s <= reach + 1e-6f; s += carve_step) {
+        const int samples = int(std::ceil(carve / carve_step));
+        for (int k = 1; k <= samples; ++k) {
+          const float s = trunc + std::min(float(k) * carve_step, carve);
+          if (s > reach) break;
           const BlockIndex b = layer->blockIndexOf(p - s * ray);
           if (b != last) {
             touched.insert(b);
