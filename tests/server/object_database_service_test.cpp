@@ -27,6 +27,7 @@
 #include "server/server.h"
 #include "tests/server/ingest_fixtures.h"
 #include "tests/storage/store_fixtures.h"
+#include "tests/server/loopback_server.h"
 #include "tests/support/temp_dir.h"
 
 namespace objdb {
@@ -43,25 +44,9 @@ using testing::session;
 using testing::setDeadline;
 using testing::twoBoxes;
 
-std::string scratchDbPath() {
-  static testing::TempDir dir;
-  static int next = 0;
-  return (dir / ("service" + std::to_string(next++) + ".sqlite")).string();
-}
-
-ServerOptions loopbackOptions(const std::string& db_path = scratchDbPath()) {
-  ServerOptions options;
-  options.listen_address = "127.0.0.1:0";
-  options.db_path = db_path;
-  options.drain_deadline = std::chrono::seconds(30);
-  return options;
-}
-
-std::unique_ptr<ObjdbServer> startOrDie(const ServerOptions& options) {
-  StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
-  EXPECT_TRUE(server.ok()) << server.status();
-  return server.ok() ? *std::move(server) : nullptr;
-}
+using testing::loopbackOptions;
+using testing::scratchDbPath;
+using testing::startOrDie;
 
 // Receives up to the server's send limit (gRPC clients accept 4 MiB by default).
 std::unique_ptr<v1::ObjectDatabase::Stub> stubFor(const ObjdbServer& server) {

@@ -12,6 +12,7 @@
 
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "objdb/v1/objdb.grpc.pb.h"
+#include "tests/server/loopback_server.h"
 #include "tests/support/temp_dir.h"
 
 namespace objdb {
@@ -23,26 +24,9 @@ using grpc::health::v1::HealthCheckResponse;
 
 constexpr auto kCallDeadline = std::chrono::seconds(10);
 
-// A fresh database file per server, in a folder removed when the test binary exits.
-std::string scratchDbPath() {
-  static testing::TempDir dir;
-  static int next = 0;
-  return (dir / ("server" + std::to_string(next++) + ".sqlite")).string();
-}
-
-ServerOptions loopbackOptions() {
-  ServerOptions options;
-  options.listen_address = "127.0.0.1:0";
-  options.db_path = scratchDbPath();
-  options.drain_deadline = std::chrono::seconds(30);
-  return options;
-}
-
-std::unique_ptr<ObjdbServer> startOrDie(const ServerOptions& options) {
-  StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
-  EXPECT_TRUE(server.ok()) << server.status();
-  return server.ok() ? *std::move(server) : nullptr;
-}
+using testing::loopbackOptions;
+using testing::scratchDbPath;
+using testing::startOrDie;
 
 std::shared_ptr<grpc::Channel> channelTo(const std::string& address) {
   return grpc::CreateChannel(address, grpc::InsecureChannelCredentials());
