@@ -23,7 +23,7 @@ Serves the objdb object database over gRPC (service objdb.v1.ObjectDatabase) tog
 standard health service (grpc.health.v1.Health): clients stream sessions in (Ingest, e.g.
 `objdb stream DATASET`) and query sessions, objects and meshes (`objdb remote`); see
 docs/server.md. SIGINT or SIGTERM drains calls in flight and stops the server; a second signal
-exits at once. Sessions not ended by then are stored as interrupted (their maps are lost).
+exits at once. Sessions not ended by then are ended by the server (their maps are stored).
 
 options:
   --listen HOST:PORT      address to listen on (default %s); port 0 picks a free
@@ -41,6 +41,8 @@ options:
   --drain-deadline-ms N   on shutdown, time calls in flight get to finish (default %d)
   --max-sessions N        sessions whose map is in memory at once (streaming, or not ended yet),
                           1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
+  --auto-end-s N          end a session whose stream closed or broke after N seconds without
+                          EndSession (its map is stored); 0 = never (default 600)
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 
@@ -123,6 +125,10 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       int ms = 0;
       if (!take_int(0, static_cast<int>(objdb::kMaxDrainDeadline.count()), &ms)) return false;
       cli->options.drain_deadline = std::chrono::milliseconds(ms);
+    } else if (arg == "--auto-end-s") {
+      int seconds = 0;
+      if (!take_int(0, 7 * 24 * 3600, &seconds)) return false;
+      cli->options.auto_end_after = std::chrono::seconds(seconds);
     } else if (arg == "--max-sessions") {
       if (!take_int(1, objdb::kMaxOpenSessions, &cli->options.max_open_sessions)) return false;
     } else if (arg == "--log-level") {

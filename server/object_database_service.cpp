@@ -146,6 +146,8 @@ struct LiveSession {
   double ended_unix_s = 0.0;
   v1::SessionCounters counters;
   std::weak_ptr<IngestStream> stream;
+  std::chrono::steady_clock::time_point stream_gone;  // when `streaming` became false
+  bool end_queued = false;  // the server queued its own end (idle too long, or stopping)
   // Database jobs to queue when the frame worker is done (EndSession of an interrupted stream).
   std::vector<std::function<void()>> after_stream;
 
@@ -344,7 +346,47 @@ ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
     : options_(options),
       store_(store),
       db_(std::move(db)),
-      database_queue_(std::make_unique<JobQueue>(options.segment_queue)) {}
+      database_queue_(std::make_unique<JobQueue>(options.segment_queue)) {
+  if (options_.auto_end_after.count() > 0) janitor_ = std::thread([this] { endIdleSessions(); });
+}
+
+void ObjectDatabaseService::endIdleSessions() {
+  const auto period = std::min<std::chrono::milliseconds>(
+      std::chrono::milliseconds(1000), std::max<std::chrono::milliseconds>(
+                                           std::chrono::milliseconds(10), options_.auto_end_after / 4));
+  std::unique_lock lock(mutex_);
+  while (!stopped_) {
+    janitor_wake_.wait_for(lock, period);
+    if (stopped_) break;
+    const auto now = std::chrono::steady_clock::now();
+    for (auto& [name, session] : sessions_) {
+      std::lock_guard session_lock(session->mutex);
+      if (session->streaming || session->end_queued ||
+          session->state == v1::SESSION_STATE_ENDED ||
+          now - session->stream_gone < options_.auto_end_after) {
+        continue;
+      }
+      session->end_queued = true;
+      logger("server")->info("session {}: no EndSession for {} s after its stream closed; "
+                             "ending it",
+                             name, options_.auto_end_after.count() / 1000.0);
+      database_queue_->push([this, session = session] { (void)endByServer(*session); });
+    }
+  }
+}
+
+Status ObjectDatabaseService::endByServer(LiveSession& session) {
+  {
+    std::lock_guard lock(session.mutex);
+    if (session.state == v1::SESSION_STATE_ENDED) return absl::OkStatus();
+  }
+  const Status ended = flush(session);
+  if (!ended.ok()) {
+    logger("server")->error("session {} could not be ended: {}", session.name,
+                            std::string(ended.message()));
+  }
+  return ended;
+}
 
 ObjectDatabaseService::~ObjectDatabaseService() { stop(); }
 
@@ -356,18 +398,29 @@ void ObjectDatabaseService::stop() {
     stopped_ = true;
     workers.swap(workers_);
   }
+  janitor_wake_.notify_all();
+  if (janitor_.joinable()) janitor_.join();
   for (auto& w : workers) w.thread.join();
-  database_queue_.reset();  // runs what is queued, then stops
-  std::lock_guard lock(mutex_);
-  for (auto& [name, session] : sessions_) {
-    std::lock_guard session_lock(session->mutex);
-    if (session->state == v1::SESSION_STATE_ENDED) continue;
-    logger("server")->warn("session {} did not end before the server stopped; its map is lost "
-                           "(segments inserted so far stay)",
-                           name);
-    (void)store_->finishSession(name, storage::SessionState::kInterrupted,
-                                int64_t(session->counters.frames_integrated()));
+  // No stream runs any more: every session not ended is ended here, its map stored, so that a
+  // stop loses nothing (after what is queued already).
+  std::vector<std::shared_ptr<LiveSession>> unended;
+  {
+    std::lock_guard lock(mutex_);
+    for (auto& [name, session] : sessions_) {
+      std::lock_guard session_lock(session->mutex);
+      if (session->state != v1::SESSION_STATE_ENDED) unended.push_back(session);
+    }
   }
+  for (const auto& session : unended) {
+    logger("server")->info("session {} did not end before the server stopped: ending it",
+                           session->name);
+    database_queue_->push([this, session] {
+      if (endByServer(*session).ok()) return;
+      (void)store_->finishSession(session->name, storage::SessionState::kInterrupted,
+                                  int64_t(session->snapshot().frames_integrated()));
+    });
+  }
+  database_queue_.reset();  // runs what is queued, then stops
 }
 
 void ObjectDatabaseService::startWorker(std::function<void()> work) {
@@ -573,6 +626,7 @@ void ObjectDatabaseService::endStreaming(const std::shared_ptr<LiveSession>& ses
   {
     std::lock_guard lock(session->mutex);
     session->streaming = false;
+    session->stream_gone = std::chrono::steady_clock::now();
     if (interrupted) {
       session->state = v1::SESSION_STATE_INTERRUPTED;
       session->ended_unix_s = nowUnixSeconds();

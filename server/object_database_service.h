@@ -19,6 +19,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <list>
 #include <map>
 #include <memory>
@@ -46,6 +47,9 @@ struct ServiceOptions {
   Params params;                    // the server's parameters; sessions may override some
   size_t frame_queue = 8;           // frames buffered per stream before reading pauses
   size_t max_open_sessions = 16;    // sessions with a map in memory; more: RESOURCE_EXHAUSTED
+  // A session whose stream closed or broke and that gets no EndSession for this long is ended by
+  // the server (map stored, segments inserted). 0 = never.
+  std::chrono::milliseconds auto_end_after{10 * 60 * 1000};
   size_t segment_queue = 64;        // segments waiting for the database before frame work waits
   int integration_threads = 2;      // TSDF integration threads per session
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size
@@ -61,8 +65,9 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
                                                                  storage::SqliteStore* store);
   ~ObjectDatabaseService() override;  // stop()
 
-  // After the gRPC server stopped (no call in flight): waits for the workers, stores sessions
-  // that did not end as interrupted. Later calls return at once.
+  // After the gRPC server stopped (no call in flight): waits for the workers, then ends every
+  // session that did not end (its map is stored; if that fails it is stored as interrupted) and
+  // runs the database queue dry. Later calls return at once.
   void stop();
 
   grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* Ingest(
@@ -114,6 +119,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   Status insert(LiveSession& session, IngestStream* stream, RawSegmentJob& job);
   // Runs on the database thread: extract everything, insert, store the scene, end the session.
   Status flush(LiveSession& session);
+  // flush() unless the session ended already; failures are logged (database thread).
+  Status endByServer(LiveSession& session);
+  // The janitor thread: ends sessions left without EndSession for auto_end_after.
+  void endIdleSessions();
   StatusOr<v1::SessionSummary> summaryOf(LiveSession& session);
   StatusOr<std::vector<uint64_t>> objectsOf(const std::string& session);
   void describe(const storage::SessionInfo& stored, v1::SessionInfo* out);
@@ -135,6 +144,8 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
 
   std::atomic<uint64_t> jobs_cancelled_{0};
   std::atomic<uint64_t> candidates_skipped_{0};
+  std::condition_variable janitor_wake_;  // with mutex_: stop() wakes the janitor
+  std::thread janitor_;
   std::unique_ptr<JobQueue> database_queue_;  // last: its thread stops first
 };
 

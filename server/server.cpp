@@ -114,6 +114,11 @@ Status ServerOptions::validate() const {
     return absl::InvalidArgumentError(absl::StrFormat(
         "max_open_sessions is %d, must be in [1, %d]", max_open_sessions, kMaxOpenSessions));
   }
+  if (auto_end_after.count() < 0 || auto_end_after > std::chrono::hours(24 * 7)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("auto_end_after is %d ms, must be in [0, one week]",
+                        static_cast<int64_t>(auto_end_after.count())));
+  }
   if (frame_queue < 1 || frame_queue > 1024) {
     return absl::InvalidArgumentError(
         absl::StrFormat("frame_queue is %d frames, must be in [1, 1024]", frame_queue));
@@ -132,6 +137,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   service_options.params = options.params;
   service_options.frame_queue = size_t(options.frame_queue);
   service_options.max_open_sessions = size_t(options.max_open_sessions);
+  service_options.auto_end_after = options.auto_end_after;
   service_options.max_send_message_bytes = size_t(options.max_send_message_bytes);
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<server::ObjectDatabaseService> service,
                          server::ObjectDatabaseService::create(service_options, store.get()));

@@ -57,6 +57,9 @@ struct ServerOptions {
   // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a
   // room at 2 cm). One more Ingest is refused with RESOURCE_EXHAUSTED.
   int max_open_sessions = 16;
+  // A session whose stream closed (or broke) and that gets no EndSession for this long is ended
+  // by the server: its map is stored and its segments inserted. 0 = never.
+  std::chrono::milliseconds auto_end_after{10 * 60 * 1000};
 
   // Checks every field; the message names the field and the bad value.
   Status validate() const;

@@ -485,8 +485,8 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   EXPECT_GT(ended.summary().object_ids_size(), 0);
   v1::ListSessionsResponse sessions;
 
-  // A session still open when the server stops loses its map: interrupted after the restart,
-  // and EndSession says why it cannot flush it.
+  // A session still open when the server stops is ended by the stop: its map is stored, and
+  // after the restart it is ENDED with its scene.
   const IngestResult open = ingest(*stub, session("wednesday", 3));
   ASSERT_TRUE(open.status.ok()) << open.status.error_message();
   server->shutdown();
@@ -494,23 +494,39 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   ASSERT_NE(server, nullptr);
   stub = stubFor(*server);
   end = endSession(*stub, "wednesday", &ended);
-  EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
-  EXPECT_NE(end.error_message().find("not kept"), std::string::npos) << end.error_message();
+  ASSERT_TRUE(end.ok()) << end.error_message();
+  EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(ended.summary().counters().frames_integrated(), 3u);
   grpc::ClientContext list_context;
   setDeadline(&list_context);
   ASSERT_TRUE(stub->ListSessions(&list_context, v1::ListSessionsRequest(), &sessions).ok());
   ASSERT_EQ(sessions.sessions_size(), 2);
   EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_ENDED);
-  EXPECT_EQ(sessions.sessions(1).state(), v1::SESSION_STATE_INTERRUPTED);
-  // Its scene was never stored.
-  grpc::ClientContext mesh_context;
-  setDeadline(&mesh_context);
-  v1::GetSceneMeshRequest request;
-  request.set_session_name("wednesday");
-  auto reader = stub->GetSceneMesh(&mesh_context, request);
-  v1::MeshChunk chunk;
-  EXPECT_FALSE(reader->Read(&chunk));
-  EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(sessions.sessions(1).state(), v1::SESSION_STATE_ENDED);
+  EXPECT_NE(server->store().scene("wednesday").value(), nullptr);
+}
+
+TEST(ObjectDatabaseService, ASessionLeftWithoutEndSessionIsEndedByTheServer) {
+  ServerOptions options = loopbackOptions();
+  options.auto_end_after = std::chrono::milliseconds(200);
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  ASSERT_TRUE(ingest(*stub, session("forgotten", 3)).status.ok());
+  v1::ListSessionsResponse sessions;
+  for (int attempt = 0; attempt < 500; ++attempt) {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    ASSERT_TRUE(stub->ListSessions(&context, v1::ListSessionsRequest(), &sessions).ok());
+    if (sessions.sessions(0).state() == v1::SESSION_STATE_ENDED) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_ENDED);
+  EXPECT_NE(server->store().scene("forgotten").value(), nullptr);
+  // Its client may still ask; the answer is the summary.
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "forgotten", &ended).ok());
+  EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
 }
 
 TEST(ObjectDatabaseService, AShutdownEndsStreamsThatNeverSentTheirHeader) {
