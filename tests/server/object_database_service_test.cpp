@@ -5,6 +5,7 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <future>
 #include <memory>
@@ -562,6 +563,60 @@ TEST(ObjectDatabaseService, SessionsBeyondTheLimitAreRefusedUntilOneEnds) {
   ASSERT_TRUE(endSession(*stub, "first", &ended).ok());
   second = ingest(*stub, session("second", 2));
   EXPECT_TRUE(second.status.ok()) << second.status.error_message();
+}
+
+TEST(ObjectDatabaseService, ConcurrentStreamsAndReadersAllSucceed) {
+  // RELIABILITY R8, reduced for two cores: three sessions stream at once while four threads
+  // query; every call succeeds and every stream's acks arrive in order.
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  constexpr size_t kFrames = 20;
+  const std::vector<std::string> names = {"north", "south", "east"};
+  std::vector<IngestResult> results(names.size());
+  std::atomic<bool> streaming{true};
+  std::atomic<int> queries{0}, failures{0};
+  std::vector<std::thread> readers;
+  for (int r = 0; r < 4; ++r) {
+    readers.emplace_back([&] {
+      while (streaming) {
+        grpc::ClientContext a, b, c;
+        setDeadline(&a);
+        setDeadline(&b);
+        setDeadline(&c);
+        v1::GetStatsResponse stats;
+        v1::ListObjectsResponse objects;
+        v1::ListSessionsResponse sessions;
+        const bool ok = stub->GetStats(&a, v1::GetStatsRequest(), &stats).ok() &&
+                        stub->ListObjects(&b, v1::ListObjectsRequest(), &objects).ok() &&
+                        stub->ListSessions(&c, v1::ListSessionsRequest(), &sessions).ok();
+        (ok ? queries : failures).fetch_add(1);
+      }
+    });
+  }
+  std::vector<std::thread> streams;
+  for (size_t i = 0; i < names.size(); ++i) {
+    streams.emplace_back([&, i] { results[i] = ingest(*stub, session(names[i], kFrames)); });
+  }
+  for (auto& t : streams) t.join();
+  streaming = false;
+  for (auto& t : readers) t.join();
+  EXPECT_GT(queries.load(), 0);
+  EXPECT_EQ(failures.load(), 0);
+  for (size_t i = 0; i < names.size(); ++i) {
+    ASSERT_TRUE(results[i].status.ok()) << names[i] << ": " << results[i].status.error_message();
+    const auto acks = results[i].acks();
+    ASSERT_EQ(acks.size(), kFrames) << names[i];
+    for (size_t k = 0; k < kFrames; ++k) {
+      EXPECT_EQ(acks[k].index(), k) << names[i];
+      EXPECT_TRUE(acks[k].accepted()) << names[i] << " " << acks[k].reason();
+    }
+    v1::EndSessionResponse ended;
+    ASSERT_TRUE(endSession(*stub, names[i], &ended).ok()) << names[i];
+    EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
+    EXPECT_EQ(ended.summary().counters().frames_integrated(), kFrames);
+    EXPECT_GT(ended.summary().object_ids_size(), 0) << names[i];
+  }
 }
 
 TEST(ObjectDatabaseService, PageTokensAreCheckedAgainstTheirListing) {
