@@ -8,8 +8,6 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
 #include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/frame_loop.h"
@@ -119,13 +117,7 @@ int runIngestCommand(int argc, char** argv) {
     if (!map.ok()) return cli::reportError(kCommand, map.status());
     storage::SessionInfo info;
     info.name = name;
-    info.intrinsics_json = nlohmann::json{{"width", ds.intrinsics().width},
-                                          {"height", ds.intrinsics().height},
-                                          {"fx", ds.intrinsics().fx},
-                                          {"fy", ds.intrinsics().fy},
-                                          {"cx", ds.intrinsics().cx},
-                                          {"cy", ds.intrinsics().cy}}
-                               .dump();
+    info.intrinsics_json = storage::intrinsicsJson(ds.intrinsics());
     info.params_json = paramsToJson(params);  // effective parameters (checkModelSettings)
     if (auto begun = (*store)->beginSession(info); !begun.ok()) {
       return cli::reportError(kCommand, begun.status());

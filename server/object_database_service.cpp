@@ -529,7 +529,7 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
   OBJDB_RETURN_IF_ERROR(checkSessionLimit());
   storage::SessionInfo info;
   info.name = session->name;
-  info.intrinsics_json = intrinsicsToJson(session->intrinsics);
+  info.intrinsics_json = storage::intrinsicsJson(session->intrinsics);
   info.params_json = paramsToJson(session->params);
   // ALREADY_EXISTS when the database has a session of that name.
   OBJDB_RETURN_IF_ERROR(store_->beginSession(info).status());

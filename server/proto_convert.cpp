@@ -106,13 +106,6 @@ StatusOr<Intrinsics> fromProto(const v1::Intrinsics& intrinsics, const std::stri
   return out;
 }
 
-std::string intrinsicsToJson(const Intrinsics& intrinsics) {
-  return nlohmann::json{{"width", intrinsics.width}, {"height", intrinsics.height},
-                        {"fx", intrinsics.fx},       {"fy", intrinsics.fy},
-                        {"cx", intrinsics.cx},       {"cy", intrinsics.cy}}
-      .dump();
-}
-
 v1::Intrinsics intrinsicsFromJson(const std::string& json) {
   v1::Intrinsics out;
   const nlohmann::json j = nlohmann::json::parse(json, nullptr, false);

@@ -25,8 +25,8 @@ StatusOr<Transform> fromProto(const v1::Pose& pose, const std::string& field);
 
 v1::Intrinsics toProto(const Intrinsics& intrinsics);
 StatusOr<Intrinsics> fromProto(const v1::Intrinsics& intrinsics, const std::string& field);
-// Intrinsics as storage keeps them (JSON text); an unreadable text gives empty intrinsics.
-std::string intrinsicsToJson(const Intrinsics& intrinsics);
+// Intrinsics as storage keeps them (storage::intrinsicsJson); an unreadable text gives empty
+// intrinsics.
 v1::Intrinsics intrinsicsFromJson(const std::string& json);
 
 // Per-frame pixel counts of a decoded depth image (FrameCounters).

@@ -4,6 +4,8 @@
 #include <functional>
 #include <map>
 
+#include <nlohmann/json.hpp>
+
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
@@ -855,6 +857,13 @@ Status SqliteStore::finishSession(const std::string& name, SessionState state, i
     return absl::NotFoundError(absl::StrFormat("no session %s", name));
   }
   return absl::OkStatus();
+}
+
+std::string intrinsicsJson(const Intrinsics& intrinsics) {
+  return nlohmann::json{{"width", intrinsics.width}, {"height", intrinsics.height},
+                        {"fx", intrinsics.fx},       {"fy", intrinsics.fy},
+                        {"cx", intrinsics.cx},       {"cy", intrinsics.cy}}
+      .dump();
 }
 
 StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {

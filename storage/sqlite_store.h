@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/intrinsics.h"
 #include "core/database/model_store.h"
 #include "storage/blob_codec.h"
 #include "storage/schema.h"
@@ -34,6 +35,9 @@ struct SqliteStoreOptions {
 
 enum class SessionState { kOpen, kEnded, kInterrupted };
 const char* sessionStateName(SessionState state);
+
+// SessionInfo::intrinsics_json of `intrinsics`: {"width", "height", "fx", "fy", "cx", "cy"}.
+std::string intrinsicsJson(const Intrinsics& intrinsics);
 
 struct SessionInfo {
   int64_t id = 0;
