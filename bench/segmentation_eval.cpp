@@ -56,7 +56,35 @@ std::vector<Sample> renderFrames(const std::string& camera, bool noise, int per_
 
 struct KindScore {
   double weighted_iou = 0.0, weighted_union_iou = 0.0, pixels = 0.0;
+  // Where the object's pixels went (sums over frames): no depth measurement, valid but on a
+  // boundary / in a dropped region (label 0), in the object's best segment, in other segments;
+  // and the pixels of the observations in which no segment has IoU ≥ 0.1 with the object.
+  double no_depth = 0.0, unlabelled = 0.0, in_best = 0.0, elsewhere = 0.0, lost = 0.0;
 };
+
+// Adds the pixel breakdown of every scored object of one frame to `per_kind`.
+void addBreakdown(const Sample& s, const segmentation::LabelImage& labels,
+                  const std::map<uint16_t, segmentation::ObjectScore>& scores,
+                  std::map<std::string, KindScore>* per_kind) {
+  for (const auto& [id, score] : scores) {
+    if (score.best_iou < 0.1) (*per_kind)[s.kind.at(id)].lost += double(score.pixels);
+  }
+  const InstanceImage& inst = *s.frame.instances;
+  for (size_t i = 0; i < inst.data.size(); ++i) {
+    const auto it = scores.find(inst.data[i]);
+    if (it == scores.end()) continue;  // background, structure or too small to score
+    KindScore& k = (*per_kind)[s.kind.at(it->first)];
+    if (!isValidDepth(s.frame.depth.data[i])) {
+      k.no_depth += 1;
+    } else if (labels.data[i] == 0) {
+      k.unlabelled += 1;
+    } else if (labels.data[i] == it->second.best_label) {
+      k.in_best += 1;
+    } else {
+      k.elsewhere += 1;
+    }
+  }
+}
 
 struct RunResult {
   segmentation::QualityCounts quality;
@@ -82,6 +110,7 @@ RunResult run(const std::vector<Sample>& samples, const Intrinsics& k, int threa
     std::map<uint16_t, segmentation::ObjectScore> scores;
     r.quality.add(
         segmentation::evaluateSegmentation(result.labels, *s.frame.instances, qo, &scores));
+    addBreakdown(s, result.labels, scores, &r.per_kind);
     for (const auto& [id, score] : scores) {
       KindScore& k = r.per_kind[s.kind.at(id)];
       k.weighted_iou += score.best_iou * double(score.pixels);
@@ -198,6 +227,16 @@ int main(int argc, char** argv) {
                     none ? 0.0 : it->second.weighted_union_iou / it->second.pixels);
       }
       std::printf("\n");
+    }
+  }
+  std::printf("\nWhere each kind's pixels go, %% of its pixels (no depth / unlabelled / best segment "
+              "/ other segments | in frames where no segment has IoU >= 0.1 with it):\n");
+  for (const auto& [name, kinds] : per_kind_rows) {
+    std::printf("%s\n", name.c_str());
+    for (const auto& [kind, k] : kinds) {
+      const double n = std::max(k.pixels, 1.0) / 100.0;
+      std::printf("  %-18s %5.1f %5.1f %5.1f %5.1f | %5.1f\n", kind.c_str(), k.no_depth / n,
+                  k.unlabelled / n, k.in_best / n, k.elsewhere / n, k.lost / n);
     }
   }
   std::printf("\nTimes in ms per frame, one thread, after 5 untimed warm-up frames; fps(N) = "

@@ -123,68 +123,111 @@ void discontinuityMap(const DepthImage& depth, int window, float threshold, Mask
 
 namespace {
 
-// dst[u] = Σ src[u + k] over k in [−r, r] and inside [0, n): a box sum with zero outside, one
-// shifted add per k so every loop vectorises (direct sums: no running-sum drift).
-void boxSumRow(const float* __restrict src, int n, int r, float* __restrict dst) {
-  std::fill(dst, dst + n, 0.0f);
-  for (int k = -r; k <= r; ++k) {
-    const int begin = std::max(0, -k), end = std::min(n, n - k);
-    for (int u = begin; u < end; ++u) dst[u] += src[u + k];
+// 1 when a neighbour at depth zj is measured and on the surface of a pixel at depth z, else 0
+// (branch-free).
+inline float sameSurfaceMask(float zj, float z, float max_relative_distance) {
+  const float near = std::abs(zj - z) <= max_relative_distance * z ? 1.0f : 0.0f;
+  return zj > 0.0f ? near : 0.0f;
+}
+
+// o += mask · (x, y, z, n) over `count` pixels, where mask says whether the neighbour (depth zk)
+// is on the centre pixel's surface (depth zc); n = 1 when `nk` is null. Restrict pointers and
+// one flat loop: it vectorises.
+void accumulateSameSurface(const float* __restrict zc, const float* __restrict zk,
+                           const float* __restrict xk, const float* __restrict yk,
+                           const float* __restrict vk, const float* __restrict nk, int count,
+                           float max_relative_distance, float* __restrict ox,
+                           float* __restrict oy, float* __restrict oz, float* __restrict on) {
+  if (nk == nullptr) {
+    for (int u = 0; u < count; ++u) {
+      const float m = sameSurfaceMask(zk[u], zc[u], max_relative_distance);
+      ox[u] += m * xk[u];
+      oy[u] += m * yk[u];
+      oz[u] += m * vk[u];
+      on[u] += m;
+    }
+  } else {
+    for (int u = 0; u < count; ++u) {
+      const float m = sameSurfaceMask(zk[u], zc[u], max_relative_distance);
+      ox[u] += m * xk[u];
+      oy[u] += m * yk[u];
+      oz[u] += m * vk[u];
+      on[u] += m * nk[u];
+    }
   }
 }
 
-// Box-filtered points over valid pixels, as planes: smoothed(u, v) = mean of the valid points in
-// the window (zero where the pixel itself or the whole window is unmeasured). Separable: each row
-// of (x, y, z, valid) is box-summed into `rows`; the columns are then running sums in double
-// (sums of floats stay exact in a double, so there is no drift down the image).
-void smoothPoints(const PointImage& points, int window, Planar3f* smoothed) {
+// Edge-preserving box filter of the points, as planes: smoothed(u, v) = mean of the valid points
+// of the window that lie on the pixel's surface (|Δz| ≤ `max_relative_distance` · z), zero where
+// the pixel is unmeasured. A plain box filter would average a silhouette's foreground with the
+// background behind it and bend the normals of a band of pixels on both sides into a fake
+// concave rim. Separable: along the rows, the window's points on the pixel's surface are summed;
+// down the columns, the row sums of the pixels on the pixel's surface. A diagonal neighbour
+// across a jump is excluded too: the row sum it belongs to is either of a pixel across the jump
+// (left out) or of a pixel on this surface, which left it out. Direct sums over the window
+// (2 × 5 taps at VGA), every loop branch-free so that it vectorises.
+void smoothPoints(const PointImage& points, int window, float max_relative_distance,
+                  Planar3f* smoothed) {
   const int w = points.width, h = points.height, r = window / 2;
   const size_t n = size_t(w) * size_t(h), ws = size_t(w);
   smoothed->resize(n);
-  thread_local std::vector<float> row_planes, rows;
-  thread_local std::vector<double> column;
-  row_planes.resize(4 * ws);
+  thread_local std::vector<float> planes, rows, acc;
+  planes.resize(3 * n);
   rows.resize(4 * n);
-  column.assign(4 * ws, 0.0);
+  acc.resize(4 * ws);
   const float* p = points.data.data()->data();
+  float* px = planes.data();
+  float* py = px + n;
+  float* pz = py + n;
+  for (size_t i = 0; i < n; ++i) {
+    px[i] = p[3 * i];
+    py[i] = p[3 * i + 1];
+    pz[i] = std::max(0.0f, p[3 * i + 2]);
+  }
+  // Rows: sums of x, y, z and count over the row window, on the centre pixel's surface.
+  float* rx = rows.data();
+  float* ry = rx + n;
+  float* rz = ry + n;
+  float* rc = rz + n;
+  std::fill(rows.begin(), rows.end(), 0.0f);
   for (int v = 0; v < h; ++v) {
-    const float* q = p + 3 * size_t(v) * ws;
-    for (size_t u = 0; u < ws; ++u) {
-      row_planes[u] = q[3 * u];
-      row_planes[ws + u] = q[3 * u + 1];
-      row_planes[2 * ws + u] = q[3 * u + 2];
-      row_planes[3 * ws + u] = q[3 * u + 2] > 0.0f ? 1.0f : 0.0f;
-    }
-    for (size_t c = 0; c < 4; ++c) {
-      boxSumRow(row_planes.data() + c * ws, w, r, rows.data() + c * n + size_t(v) * ws);
+    const size_t row = size_t(v) * ws;
+    for (int k = -r; k <= r; ++k) {
+      const int begin = std::max(0, -k), end = std::min(w, w - k);
+      if (end <= begin) continue;
+      const size_t c = row + size_t(begin), o = size_t(ptrdiff_t(c) + k);
+      accumulateSameSurface(pz + c, pz + o, px + o, py + o, pz + o, nullptr, end - begin,
+                            max_relative_distance, rx + c, ry + c, rz + c, rc + c);
     }
   }
-  auto add_row = [&](int v, double sign) {
-    for (size_t c = 0; c < 4; ++c) {
-      const float* __restrict in = rows.data() + c * n + size_t(v) * ws;
-      double* __restrict acc = column.data() + c * ws;
-      for (size_t u = 0; u < ws; ++u) acc[u] += sign * double(in[u]);
-    }
-  };
-  for (int v = 0; v < std::min(r, h); ++v) add_row(v, 1.0);
+  // Columns: the row sums of the pixels above and below on the pixel's surface.
+  float* ax = acc.data();
+  float* ay = ax + ws;
+  float* az = ay + ws;
+  float* ac = az + ws;
   float* __restrict sx = smoothed->x.data();
   float* __restrict sy = smoothed->y.data();
   float* __restrict sz = smoothed->z.data();
   for (int v = 0; v < h; ++v) {
-    if (v + r < h) add_row(v + r, 1.0);
-    if (v - r - 1 >= 0) add_row(v - r - 1, -1.0);
     const size_t row = size_t(v) * ws;
-    const double* __restrict cx = column.data();
-    const double* __restrict cy = cx + ws;
-    const double* __restrict cz = cy + ws;
-    const double* __restrict count = cz + ws;
-    const float* __restrict z = p + 3 * row + 2;
+    std::fill(acc.begin(), acc.end(), 0.0f);
+    for (int k = std::max(-r, -v); k <= std::min(r, h - 1 - v); ++k) {
+      const size_t other = size_t(v + k) * ws;
+      accumulateSameSurface(pz + row, pz + other, rx + other, ry + other, rz + other,
+                            rc + other, w, max_relative_distance, ax, ay, az, ac);
+    }
+    const float* __restrict zc = pz + row;
+    const float* __restrict cx = ax;
+    const float* __restrict cy = ay;
+    const float* __restrict cz = az;
+    const float* __restrict cn = ac;
     for (size_t u = 0; u < ws; ++u) {
-      const bool ok = (count[u] > 0.5) & (z[3 * u] > 0.0f);
-      const double inv = 1.0 / (ok ? count[u] : 1.0);
-      sx[row + u] = ok ? float(cx[u] * inv) : 0.0f;
-      sy[row + u] = ok ? float(cy[u] * inv) : 0.0f;
-      sz[row + u] = ok ? float(cz[u] * inv) : 0.0f;
+      // The pixel itself is always in its sum, so cn ≥ 1 wherever it is measured.
+      const float measured = zc[u] > 0.0f ? 1.0f : 0.0f;
+      const float scale = measured / std::max(cn[u], 1.0f);
+      sx[row + u] = cx[u] * scale;
+      sy[row + u] = cy[u] * scale;
+      sz[row + u] = cz[u] * scale;
     }
   }
 }
@@ -440,7 +483,7 @@ void computeNormals(const PointImage& points, int window, float max_relative_dis
                     NormalImage* normals) {
   const int w = points.width, h = points.height;
   Planar3f smoothed, planes;
-  smoothPoints(points, smoothingWindow(window), &smoothed);
+  smoothPoints(points, smoothingWindow(window), max_relative_distance, &smoothed);
   std::vector<float> z(points.data.size());
   for (size_t i = 0; i < z.size(); ++i) z[i] = std::max(0.0f, points.data[i].z());
   normalsFromSmoothed(z.data(), smoothed, w, h, differenceOffset(window), max_relative_distance,
@@ -514,7 +557,8 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   result.timings.discontinuity_ms = msSince(t);
 
   t = Clock::now();
-  smoothPoints(points_, smoothingWindow(params_.normal_window_px), &smoothed_);
+  smoothPoints(points_, smoothingWindow(params_.normal_window_px),
+               params_.normal_max_relative_distance, &smoothed_);
   normalsFromSmoothed(depth_.data.data(), smoothed_, w, h,
                       differenceOffset(params_.normal_window_px),
                       params_.normal_max_relative_distance, &normals_);

@@ -39,10 +39,11 @@ void depthToPoints(const DepthImage& depth, const Intrinsics& intrinsics, PointI
 void discontinuityMap(const DepthImage& depth, int window, float threshold, MaskImage* edges);
 
 // Normals from the pixel neighbourhood: the point image is box-filtered over about window/3
-// pixels (valid pixels only) and the normal is the cross product of central differences of the
-// smoothed points window/3 pixels apart, falling back to one-sided
-// differences across a depth jump of more than `max_relative_distance` · z. A plane gives its
-// exact normal; noise is averaged over the window.
+// pixels, averaging only the neighbours on the pixel's own surface (|Δz| ≤
+// `max_relative_distance` · z, so a silhouette does not bend the normals next to it), and the
+// normal is the cross product of central differences of the smoothed points window/3 pixels
+// apart, falling back to one-sided differences across a depth jump of more than
+// `max_relative_distance` · z. A plane gives its exact normal; noise is averaged over the window.
 void computeNormals(const PointImage& points, int window, float max_relative_distance,
                     NormalImage* normals);
 

@@ -62,10 +62,14 @@ QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage
   }
   // Per object: best IoU.
   std::unordered_map<uint16_t, double> best_iou;
+  std::unordered_map<uint16_t, int32_t> best_label;
   for (const auto& [key, n] : overlap) {
     const auto [label, g] = key;
     const double iou = double(n) / double(segment_size[label] + instance_size[g] - n);
-    best_iou[g] = std::max(best_iou[g], iou);
+    if (iou > best_iou[g]) {
+      best_iou[g] = iou;
+      best_label[g] = label;
+    }
   }
   for (const auto& [g, size] : instance_size) {
     if (options.structure_ids.count(g) || size < size_t(options.min_object_pixels)) continue;
@@ -76,7 +80,7 @@ QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage
     const double union_iou =
         union_size ? double(union_on) / double(union_size + size - union_on) : 0.0;
     q.weighted_union_iou += double(size) * union_iou;
-    if (scores) (*scores)[g] = ObjectScore{best_iou[g], union_iou, size};
+    if (scores) (*scores)[g] = ObjectScore{best_iou[g], union_iou, size, best_label[g]};
   }
   return q;
 }

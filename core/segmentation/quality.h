@@ -47,6 +47,7 @@ struct ObjectScore {
   double best_iou = 0.0;
   double union_iou = 0.0;  // the union of the segments whose majority is this object
   size_t pixels = 0;
+  int32_t best_label = 0;  // the segment with the best IoU (0 = none overlaps the object)
 };
 QualityCounts evaluateSegmentation(const LabelImage& labels, const InstanceImage& instances,
                                    const QualityOptions& options,

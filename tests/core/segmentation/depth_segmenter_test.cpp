@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <set>
@@ -390,6 +391,44 @@ TEST(ComputeNormals, InvalidPixelsHaveNoNormal) {
   // A fronto-parallel plane: normal (0, 0, −1), also right next to the hole.
   EXPECT_LT(angleDeg(normals.at(320, 100), Eigen::Vector3f(0, 0, -1)), 0.1);
   EXPECT_LT(angleDeg(normals.at(99, 150), Eigen::Vector3f(0, 0, -1)), 0.1);
+}
+
+// Two fronto-parallel planes, 1.5 m and 2 m away, meet at a silhouette (straight across the
+// image, down it, and on a diagonal staircase). Smoothing must not average the two surfaces:
+// every pixel of both, right up to the jump, keeps the exact normal (0, 0, −1). A plain box
+// filter bends the normals of the pixels next to the jump into a ramp.
+TEST(ComputeNormals, ASilhouetteDoesNotBendTheNormalsOnEitherSide) {
+  const Intrinsics k = Intrinsics::vga();
+  const std::vector<std::pair<std::string, std::function<bool(int, int)>>> steps = {
+      {"vertical", [](int u, int) { return u < 320; }},
+      {"horizontal", [](int, int v) { return v < 240; }},
+      {"diagonal", [](int u, int v) { return u + v < 560; }}};
+  for (const auto& [name, near] : steps) {
+    DepthImage depth(k.width, k.height, 2.0f);
+    for (int v = 0; v < k.height; ++v) {
+      for (int u = 0; u < k.width; ++u) depth.at(u, v) = near(u, v) ? 1.5f : 2.0f;
+    }
+    PointImage points;
+    depthToPoints(depth, k, &points);
+    NormalImage normals;
+    computeNormals(points, 13, 0.05f, &normals);
+    // Only a pixel with no same-surface neighbour in one direction has no normal: where the
+    // staircase meets the image border (neighbours are 13 / 3 = 4 pixels apart).
+    double worst = 0.0;
+    size_t missing = 0;
+    for (int v = 0; v < k.height; ++v) {
+      for (int u = 0; u < k.width; ++u) {
+        if (normals.at(u, v).isZero()) {
+          ++missing;
+          EXPECT_TRUE(v < 4 || v >= k.height - 4) << name << " " << u << "," << v;
+          continue;
+        }
+        worst = std::max(worst, angleDeg(normals.at(u, v), Eigen::Vector3f(0, 0, -1)));
+      }
+    }
+    EXPECT_LE(missing, 40u) << name;
+    EXPECT_LT(worst, 0.01) << name;
+  }
 }
 
 TEST(DepthToPoints, BackProjectsValidPixelsAndZeroesInvalidOnes) {

@@ -75,6 +75,9 @@ TEST(EvaluateSegmentation, UnionCoverageJoinsTheSegmentsMostlyInsideAnObject) {
   // Instance 2 (40 px): segment 4 = 35 px all on it: IoU 35 / 40 both ways.
   EXPECT_NEAR(scores[2].best_iou, 35.0 / 40.0, 1e-9);
   EXPECT_NEAR(scores[2].union_iou, 35.0 / 40.0, 1e-9);
+  // The best segments: 1 or 2 (a tie) for instance 1, 4 for instance 2.
+  EXPECT_TRUE(scores[1].best_label == 1 || scores[1].best_label == 2) << scores[1].best_label;
+  EXPECT_EQ(scores[2].best_label, 4);
   EXPECT_NEAR(q.unionCoverage(), (60 * 12.0 / 13.0 + 40 * 35.0 / 40.0) / 100.0, 1e-9);
   EXPECT_GT(q.unionCoverage(), q.coverage());
 }
