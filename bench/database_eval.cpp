@@ -9,7 +9,8 @@
 // scale; copies of a model share its descriptors, so the prefilter finds the most candidates it
 // can: a worst case).
 //   database_eval [--camera tango|vga] [--frames-per-session N] [--sessions N] [--threads N]
-//                 [--scale N] [--config FILE.json] [--db FILE.sqlite]
+//                 [--scale N] [--config FILE.json] [--db FILE.sqlite] [--per-object]
+//                 [--per-segment]
 // With --db the database lives in that SQLite file (created anew) instead of memory: the same
 // experiment with persistence, every insert and merge one transaction.
 #include <malloc.h>
@@ -64,7 +65,7 @@ int main(int argc, char** argv) {
   Params params;
   int threads = params.database.threads;
   int scale = 0;
-  bool per_object = false;
+  bool per_object = false, per_segment = false;
   std::string db_path;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -80,6 +81,8 @@ int main(int argc, char** argv) {
       db_path = argv[++i];
     } else if (a == "--per-object") {
       per_object = true;
+    } else if (a == "--per-segment") {
+      per_segment = true;
     } else if (a == "--scale" && i + 1 < argc) {
       scale = std::max(0, std::atoi(argv[++i]));
     } else if (a == "--config" && i + 1 < argc) {
@@ -92,7 +95,7 @@ int main(int argc, char** argv) {
     } else {
       std::fprintf(stderr, "usage: database_eval [--camera tango|vga] [--frames-per-session N] "
                            "[--sessions N] [--threads N] [--scale N] [--config FILE.json] "
-                           "[--db FILE.sqlite] [--per-object]\n");
+                           "[--db FILE.sqlite] [--per-object] [--per-segment]\n");
       return 2;
     }
   }
@@ -269,6 +272,23 @@ int main(int argc, char** argv) {
         if (c.registration.accepted && !relevant.empty()) {
           (same ? etsdf_same : etsdf_other).push_back(c.model_verdict.agreement.rmse);
           (same ? overlap_same : overlap_other).push_back(double(c.model_verdict.agreement.overlap));
+        }
+      }
+      if (per_segment) {
+        // One line per insert, then its candidates that hold the segment's kind: where each
+        // stopped and why (the place to see why two views of one object did not merge).
+        std::printf("segment %s/%u %s#%d (%.0f%%) %zu voxels: %s%s\n", scene.name.c_str(), label,
+                    t.kind.c_str(), t.object, 100 * t.purity, segment.label_voxels.size(),
+                    report->planar ? "planar" : (report->matchable ? "matchable" : "not describable"),
+                    report->merged ? absl::StrFormat(", merged into model %lld",
+                                                     (long long)report->model_id).c_str()
+                                   : "");
+        for (const auto& c : report->results) {
+          if (!relevant.count(c.model_id)) continue;
+          std::printf("    candidate model %lld: %s%s (e_TSDF %.1f mm, o_TSDF %zu)\n",
+                      (long long)c.model_id, c.accepted ? "accepted" : c.stage.c_str(),
+                      c.accepted ? "" : (": " + c.reason).c_str(),
+                      1000 * c.model_verdict.agreement.rmse, size_t(c.model_verdict.agreement.overlap));
         }
       }
       planar += report->planar ? 1 : 0;
