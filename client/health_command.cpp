@@ -10,6 +10,7 @@
 #include "absl/strings/str_format.h"
 #include "client/cli_util.h"
 #include "client/commands.h"
+#include "client/remote.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace objdb {
@@ -21,8 +22,7 @@ constexpr const char* kUsage =
 Asks an objdb server (or any gRPC server with the standard health service) whether it is
 serving, and prints SERVING or NOT_SERVING.
 
-  --server HOST:PORT   server address (default 127.0.0.1:50051)
-  --timeout-ms N       deadline of the call in milliseconds, 1..3600000 (default 2000)
+)" OBJDB_CONNECTION_USAGE R"(  --timeout-ms N       deadline of the call in milliseconds, 1..3600000 (default 2000)
   --service NAME       ask about one service, e.g. objdb.v1.ObjectDatabase (default: the whole
                        server)
   -h, --help           show this text
@@ -36,7 +36,7 @@ int usageError(const std::string& message) { return cli::usageError("health", me
 }  // namespace
 
 int runHealthCommand(int argc, char** argv) {
-  std::string server = "127.0.0.1:50051";
+  cli::Connection connection;
   std::string service;
   int timeout_ms = 2000;
   for (int i = 1; i < argc; ++i) {
@@ -45,13 +45,13 @@ int runHealthCommand(int argc, char** argv) {
       std::fputs(kUsage, stdout);
       return 0;
     }
-    if (arg != "--server" && arg != "--timeout-ms" && arg != "--service") {
+    cli::Connection probe;
+    if (arg != "--timeout-ms" && arg != "--service" && !cli::takeConnectionFlag(arg, "", &probe)) {
       return usageError(absl::StrFormat("unknown option \"%s\"", arg));
     }
     if (i + 1 >= argc) return usageError(absl::StrFormat("%s needs a value", arg));
     const std::string value = argv[++i];
-    if (arg == "--server") {
-      server = value;
+    if (cli::takeConnectionFlag(arg, value, &connection)) {
     } else if (arg == "--service") {
       service = value;
     } else if (!absl::SimpleAtoi(value, &timeout_ms) || timeout_ms < 1 || timeout_ms > 3600000) {
@@ -59,10 +59,13 @@ int runHealthCommand(int argc, char** argv) {
           absl::StrFormat("--timeout-ms must be an integer in [1, 3600000], got \"%s\"", value));
     }
   }
-  if (server.empty()) return usageError("--server is empty");
+  if (connection.server.empty()) return usageError("--server is empty");
+  const std::string& server = connection.server;
 
-  // Plaintext like the server; TLS and the token come with the authentication issue (R11).
-  auto channel = grpc::CreateChannel(server, grpc::InsecureChannelCredentials());
+  // Health needs no token, but the channel is the one the other commands use (TLS when asked).
+  StatusOr<std::shared_ptr<grpc::Channel>> opened = cli::openChannel(connection);
+  if (!opened.ok()) return cli::reportError("health", opened.status());
+  const std::shared_ptr<grpc::Channel>& channel = *opened;
   auto stub = grpc::health::v1::Health::NewStub(channel);
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(timeout_ms));

@@ -1,17 +1,79 @@
 #include "client/remote.h"
 
 #include <cstdio>
+#include <vector>
+
+#include <grpcpp/support/client_interceptor.h>
 
 #include "absl/status/status.h"
 
 namespace objdb::cli {
 
-std::unique_ptr<v1::ObjectDatabase::Stub> objectDatabaseStub(const std::string& server) {
+namespace {
+
+// Adds "authorization: Bearer <token>" to every call of a channel. (Call credentials would not
+// do: gRPC attaches them only to channels secure enough for them, never to a plaintext one.)
+class BearerInterceptor final : public grpc::experimental::Interceptor {
+ public:
+  explicit BearerInterceptor(const std::string* header) : header_(header) {}
+  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+    if (methods->QueryInterceptionHookPoint(
+            grpc::experimental::InterceptionHookPoints::PRE_SEND_INITIAL_METADATA)) {
+      methods->GetSendInitialMetadata()->insert({auth::kAuthorizationKey, *header_});
+    }
+    methods->Proceed();
+  }
+
+ private:
+  const std::string* header_;
+};
+
+class BearerInterceptorFactory final
+    : public grpc::experimental::ClientInterceptorFactoryInterface {
+ public:
+  explicit BearerInterceptorFactory(std::string token)
+      : header_(std::string(auth::kBearerPrefix) + token) {}
+  grpc::experimental::Interceptor* CreateClientInterceptor(
+      grpc::experimental::ClientRpcInfo*) override {
+    return new BearerInterceptor(&header_);
+  }
+
+ private:
+  const std::string header_;  // lives as long as the channel (gRPC owns the factory)
+};
+
+}  // namespace
+
+bool takeConnectionFlag(const std::string& flag, const std::string& value, Connection* c) {
+  if (flag == "--server") {
+    c->server = value;
+  } else if (flag == "--token-file") {
+    c->token_file = value;
+  } else if (flag == "--tls-ca") {
+    c->tls.ca_file = value;
+  } else if (flag == "--tls-cert") {
+    c->tls.cert_file = value;
+  } else if (flag == "--tls-key") {
+    c->tls.key_file = value;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+StatusOr<std::shared_ptr<grpc::Channel>> openChannel(const Connection& connection) {
+  if (connection.server.empty()) return absl::InvalidArgumentError("--server is empty");
+  OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ChannelCredentials> credentials,
+                         auth::channelCredentials(connection.tls));
   grpc::ChannelArguments arguments;
   arguments.SetMaxReceiveMessageSize(1024 * 1024 * 1024);  // the server's limit decides
-  // Plaintext like the server; TLS and tokens come with the authentication issue (R11).
-  return v1::ObjectDatabase::NewStub(
-      grpc::CreateCustomChannel(server, grpc::InsecureChannelCredentials(), arguments));
+  std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
+  if (!connection.token_file.empty()) {
+    OBJDB_ASSIGN_OR_RETURN(std::string token, auth::readTokenFile(connection.token_file));
+    interceptors.push_back(std::make_unique<BearerInterceptorFactory>(std::move(token)));
+  }
+  return grpc::experimental::CreateCustomChannelWithInterceptors(
+      connection.server, credentials, arguments, std::move(interceptors));
 }
 
 void setDeadline(grpc::ClientContext* context, double seconds) {
@@ -27,8 +89,11 @@ int reportRpcError(const char* command, const std::string& what, const std::stri
                server.c_str(), code.c_str(), status.error_message().c_str());
   if (status.error_code() == grpc::StatusCode::UNAVAILABLE) {
     std::fprintf(stderr, "  (is objdb-server running there? start it with objdb-server --listen %s "
-                         "--db FILE.sqlite)\n",
+                         "--db FILE.sqlite; a TLS server needs --tls-ca, and a plaintext one "
+                         "none)\n",
                  server.c_str());
+  } else if (status.error_code() == grpc::StatusCode::UNAUTHENTICATED) {
+    std::fprintf(stderr, "  (the server wants its token: --token-file FILE)\n");
   }
   return 1;
 }

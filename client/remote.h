@@ -1,5 +1,6 @@
-// What the commands that talk to an objdb server share: the channel (plaintext like the server
-// until authentication lands; large receive limit for meshes) and one way to report a failed call.
+// What the commands that talk to an objdb server share: how to reach it (address, TLS, token:
+// server/auth.h), the channel (large receive limit for meshes) and one way to report a failed
+// call.
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -8,13 +9,37 @@
 #include <memory>
 #include <string>
 
+#include "core/common/status.h"
 #include "objdb/v1/objdb.grpc.pb.h"
+#include "server/auth.h"
 
 namespace objdb::cli {
 
 inline constexpr const char* kDefaultServer = "127.0.0.1:50051";
 
-std::unique_ptr<v1::ObjectDatabase::Stub> objectDatabaseStub(const std::string& server);
+// --server, --token-file, --tls-ca, --tls-cert, --tls-key.
+struct Connection {
+  std::string server = kDefaultServer;
+  std::string token_file;     // its token goes with every call ("authorization: Bearer ...")
+  auth::TlsClientFiles tls;   // empty ca_file = plaintext
+};
+
+// The usage lines of those options, spliced into the commands' help texts (a macro so that it
+// joins their string literals at compile time).
+#define OBJDB_CONNECTION_USAGE                                                                   \
+  "  --server HOST:PORT   server address (default 127.0.0.1:50051)\n"                           \
+  "  --token-file FILE    send the token in FILE with every call (a server with --token-file)\n" \
+  "  --tls-ca FILE        connect with TLS, trusting server certificates this PEM CA signed\n"   \
+  "  --tls-cert FILE      with --tls-key: a PEM client certificate (a server with\n"             \
+  "                       --tls-client-ca)\n"                                                    \
+  "  --tls-key FILE       that certificate's PEM key\n"
+
+// When `flag` is one of the connection options, stores `value` and returns true.
+bool takeConnectionFlag(const std::string& flag, const std::string& value, Connection* connection);
+
+// The channel: TLS when a CA is given, the token attached to every call when a token file is.
+// Errors: an empty server address, unreadable or bad token / PEM files (named).
+StatusOr<std::shared_ptr<grpc::Channel>> openChannel(const Connection& connection);
 
 // A deadline `seconds` from now.
 void setDeadline(grpc::ClientContext* context, double seconds);

@@ -33,13 +33,12 @@ Asks a running objdb server (objdb-server) about its database.
   scene     a session's mesh in its world frame as PLY (GetSceneMesh); --completed fills what the
             session never saw with the database's merged models
 
-  --server HOST:PORT   server address (default 127.0.0.1:50051)
-  --timeout S          seconds a call may take (default 600)
+)" OBJDB_CONNECTION_USAGE R"(  --timeout S          seconds a call may take (default 600)
   -h, --help           show this text
 )";
 
 struct Options {
-  std::string server = cli::kDefaultServer;
+  cli::Connection connection;
   std::string session, out, what = "mesh";
   long long id = 0;
   bool merged = false, completed = false;
@@ -56,8 +55,8 @@ int stats(v1::ObjectDatabase::Stub& stub, const Options& o) {
   cli::setDeadline(&context, o.timeout_s);
   v1::GetStatsResponse s;
   const grpc::Status status = stub.GetStats(&context, v1::GetStatsRequest(), &s);
-  if (!status.ok()) return cli::reportRpcError(kCommand, "GetStats", o.server, status);
-  std::printf("server %s, version %s, up %.0f s\n", o.server.c_str(), s.server_version().c_str(),
+  if (!status.ok()) return cli::reportRpcError(kCommand, "GetStats", o.connection.server, status);
+  std::printf("server %s, version %s, up %.0f s\n", o.connection.server.c_str(), s.server_version().c_str(),
               s.uptime_s());
   std::printf("sessions: %llu (%u streaming now), %llu frames integrated\n",
               (unsigned long long)s.sessions_total(), s.sessions_open(),
@@ -80,7 +79,7 @@ int sessions(v1::ObjectDatabase::Stub& stub, const Options& o) {
     cli::setDeadline(&context, o.timeout_s);
     v1::ListSessionsResponse page;
     const grpc::Status status = stub.ListSessions(&context, request, &page);
-    if (!status.ok()) return cli::reportRpcError(kCommand, "ListSessions", o.server, status);
+    if (!status.ok()) return cli::reportRpcError(kCommand, "ListSessions", o.connection.server, status);
     for (const auto& s : page.sessions()) {
       std::string state = v1::SessionState_Name(s.state());
       state = state.substr(std::string("SESSION_STATE_").size());
@@ -107,7 +106,7 @@ int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
     cli::setDeadline(&context, o.timeout_s);
     v1::ListObjectsResponse page;
     const grpc::Status status = stub.ListObjects(&context, request, &page);
-    if (!status.ok()) return cli::reportRpcError(kCommand, "ListObjects", o.server, status);
+    if (!status.ok()) return cli::reportRpcError(kCommand, "ListObjects", o.connection.server, status);
     for (const auto& m : page.objects()) {
       std::printf("%8llu %-7s %6u %-22s %7s  %s\n", (unsigned long long)m.id(),
                   m.state() == v1::OBJECT_STATE_MERGED ? "merged" : "active", m.num_poses(),
@@ -131,7 +130,7 @@ int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
   request.set_include_cloud(!o.out.empty() && o.what == "cloud");
   v1::ObjectDetail d;
   const grpc::Status status = stub.GetObject(&context, request, &d);
-  if (!status.ok()) return cli::reportRpcError(kCommand, "GetObject", o.server, status);
+  if (!status.ok()) return cli::reportRpcError(kCommand, "GetObject", o.connection.server, status);
   std::printf("object %llu: %s, %s, extent %s m, %u points, %u keypoints, %u voxels of %.3f m, "
               "%u merges\n",
               (unsigned long long)d.summary().id(),
@@ -170,7 +169,7 @@ int scene(v1::ObjectDatabase::Stub& stub, const Options& o) {
     ++chunks;
   }
   const grpc::Status status = reader->Finish();
-  if (!status.ok()) return cli::reportRpcError(kCommand, "GetSceneMesh", o.server, status);
+  if (!status.ok()) return cli::reportRpcError(kCommand, "GetSceneMesh", o.connection.server, status);
   if (Status written = io::writePlyMesh(o.out, mesh); !written.ok()) {
     return cli::reportError(kCommand, written);
   }
@@ -207,8 +206,7 @@ int runRemoteCommand(int argc, char** argv) {
     if (i + 1 >= argc) return cli::usageError(kCommand, a + " needs a value", kUsage);
     const char* value = argv[++i];
     long long seconds = 0;
-    if (a == "--server") {
-      o.server = value;
+    if (cli::takeConnectionFlag(a, value, &o.connection)) {
     } else if (a == "--session") {
       o.session = value;
     } else if (a == "--out") {
@@ -231,8 +229,10 @@ int runRemoteCommand(int argc, char** argv) {
       return cli::usageError(kCommand, "unknown option '" + a + "'", kUsage);
     }
   }
-  if (o.server.empty()) return cli::usageError(kCommand, "--server is empty", kUsage);
-  auto stub = cli::objectDatabaseStub(o.server);
+  if (o.connection.server.empty()) return cli::usageError(kCommand, "--server is empty", kUsage);
+  auto channel = cli::openChannel(o.connection);
+  if (!channel.ok()) return cli::reportError(kCommand, channel.status());
+  auto stub = v1::ObjectDatabase::NewStub(*channel);
   if (action == "stats") return stats(*stub, o);
   if (action == "sessions") return sessions(*stub, o);
   if (action == "objects") return objects(*stub, o);

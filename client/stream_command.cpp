@@ -32,8 +32,7 @@ streams each of them, in name order. The server segments every frame, fuses it i
 Global Segmentation Map and inserts extracted segments into its object database; this command
 shows its acks and events, then ends the session (EndSession), which stores the session's map.
 
-  --server HOST:PORT   server address (default 127.0.0.1:50051)
-  --params FILE        per-session parameter overrides as JSON (segmentation, tsdf, gsm sections)
+)" OBJDB_CONNECTION_USAGE R"(  --params FILE        per-session parameter overrides as JSON (segmentation, tsdf, gsm sections)
   --every N            send every N-th frame (default 1)
   --no-end             leave the sessions open (EndSession later, or never)
   --end-timeout S      seconds EndSession may take (default 600)
@@ -45,7 +44,7 @@ exit status: 0 all sessions streamed (rejected frames are reported, not fatal); 
 )";
 
 struct Options {
-  std::string server = cli::kDefaultServer;
+  cli::Connection connection;
   std::string params_json;
   long long every = 1;
   bool end = true;
@@ -60,7 +59,7 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   auto stream = stub.Ingest(&context);
   const size_t frames = (ds.size() + size_t(options.every) - 1) / size_t(options.every);
   std::printf("session %s: %zu frames from %s to %s\n", name.c_str(), frames,
-              ds.root().c_str(), options.server.c_str());
+              ds.root().c_str(), options.connection.server.c_str());
 
   // The reader: acks drive the progress bar; rejections and (with -v) events are printed.
   std::mutex print_mutex;
@@ -145,7 +144,7 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   const grpc::Status status = stream->Finish();
   bar.finish();
   if (!load_error.ok()) return cli::reportError(kCommand, load_error);
-  if (!status.ok()) return cli::reportRpcError(kCommand, "Ingest of session " + name, options.server, status);
+  if (!status.ok()) return cli::reportRpcError(kCommand, "Ingest of session " + name, options.connection.server, status);
   std::printf("  %zu frames acked (%zu rejected), %zu segments into the database (%zu new objects, "
               "%zu merged into earlier ones)\n",
               acked, rejected, segments, created, merged);
@@ -160,7 +159,7 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   v1::EndSessionResponse ended;
   const grpc::Status end_status = stub.EndSession(&end_context, end, &ended);
   if (!end_status.ok()) {
-    return cli::reportRpcError(kCommand, "EndSession of " + name, options.server, end_status);
+    return cli::reportRpcError(kCommand, "EndSession of " + name, options.connection.server, end_status);
   }
   const v1::SessionCounters& c = ended.summary().counters();
   std::printf("  ended: %llu frames integrated, %llu segments (%llu new objects, %llu merges); "
@@ -198,8 +197,7 @@ int runStreamCommand(int argc, char** argv) {
     if (i + 1 >= argc) return cli::usageError(kCommand, a + " needs a value", kUsage);
     const char* value = argv[++i];
     long long seconds = 0;
-    if (a == "--server") {
-      options.server = value;
+    if (cli::takeConnectionFlag(a, value, &options.connection)) {
     } else if (a == "--params") {
       params_file = value;
     } else if (a == "--every") {
@@ -216,7 +214,7 @@ int runStreamCommand(int argc, char** argv) {
     }
   }
   if (datasets.empty()) return cli::usageError(kCommand, "at least one DATASET is required", kUsage);
-  if (options.server.empty()) return cli::usageError(kCommand, "--server is empty", kUsage);
+  if (options.connection.server.empty()) return cli::usageError(kCommand, "--server is empty", kUsage);
   if (!params_file.empty()) {
     auto text = io::internal::readFile(params_file);
     if (!text.ok()) return cli::reportError(kCommand, text.status());
@@ -224,7 +222,9 @@ int runStreamCommand(int argc, char** argv) {
   }
   auto sessions = cli::datasetSessions(datasets);
   if (!sessions.ok()) return cli::reportError(kCommand, sessions.status());
-  auto stub = cli::objectDatabaseStub(options.server);
+  auto channel = cli::openChannel(options.connection);
+  if (!channel.ok()) return cli::reportError(kCommand, channel.status());
+  auto stub = v1::ObjectDatabase::NewStub(*channel);
   for (const auto& [name, path] : *sessions) {
     auto opened = io::openDataset(path);
     if (!opened.ok()) return cli::reportError(kCommand, opened.status());

@@ -10,6 +10,7 @@ PACKAGES=(
   libsqlite3-dev libzstd-dev zlib1g-dev
   libspdlog-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  openssl
 )
 
 missing=()

@@ -28,9 +28,16 @@ exits at once. Sessions not ended by then are ended by the server (their maps ar
 options:
   --listen HOST:PORT      address to listen on (default %s); port 0 picks a free
                           port. The address is logged as "listening on HOST:PORT".
-  --allow-remote          accept a non-loopback --listen address such as 0.0.0.0:50051. The
-                          server has no authentication yet: anyone who can reach the port can
-                          read and write the database.
+  --token-file FILE       require "authorization: Bearer <token>" on every objdb.v1 call, the
+                          token being FILE's content (16..4096 printable characters, e.g.
+                          `openssl rand -hex 32 > FILE`); others get UNAUTHENTICATED. Health
+                          checks need no token. The token is never logged.
+  --tls-cert FILE         serve TLS with this PEM certificate chain ...
+  --tls-key FILE          ... and its PEM private key
+  --tls-client-ca FILE    require client certificates signed by this PEM CA (mutual TLS)
+  --allow-remote          accept a non-loopback --listen address (such as 0.0.0.0:50051)
+                          without TLS + token or client certificates. Without them anyone who
+                          can reach the port can read and write the database.
   --db PATH               SQLite database file, created if missing (default %s); a corrupt
                           file, another application's database or a newer schema refuses the
                           start, and the file is left untouched
@@ -109,6 +116,14 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
     } else if (arg == "--allow-remote") {
       if (!no_value()) return false;
       cli->options.allow_remote = true;
+    } else if (arg == "--token-file") {
+      if (!take_value(&cli->options.token_file)) return false;
+    } else if (arg == "--tls-cert") {
+      if (!take_value(&cli->options.tls_cert_file)) return false;
+    } else if (arg == "--tls-key") {
+      if (!take_value(&cli->options.tls_key_file)) return false;
+    } else if (arg == "--tls-client-ca") {
+      if (!take_value(&cli->options.tls_client_ca_file)) return false;
     } else if (arg == "--db") {
       if (!take_value(&cli->options.db_path)) return false;
     } else if (arg == "--config") {

@@ -21,6 +21,7 @@
 #include "core/gsm/gsm.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "core/tsdf/mesh_extraction.h"
+#include "server/auth.h"
 #include "server/job_queue.h"
 #include "server/proto_convert.h"
 #include "server/status_convert.h"
@@ -46,6 +47,25 @@ grpc::ServerUnaryReactor* finishUnary(grpc::CallbackServerContext* context, cons
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   reactor->Finish(toGrpcStatus(status));
   return reactor;
+}
+
+// Ends a streaming call at once with `status` (a refused call: no token, wrong token).
+template <typename Reactor>
+class RefusedCall final : public Reactor {
+ public:
+  explicit RefusedCall(const grpc::Status& status) { this->Finish(status); }
+  void OnDone() override { delete this; }
+};
+
+// The call's bearer token against the server's (auth::checkBearer); the first thing every
+// handler does.
+Status authorize(const grpc::CallbackServerContext* context, const std::string& token) {
+  if (token.empty()) return absl::OkStatus();
+  const auto& metadata = context->client_metadata();
+  const auto it = metadata.find(auth::kAuthorizationKey);
+  if (it == metadata.end()) return auth::checkBearer(token, nullptr);
+  const std::string value(it->second.data(), it->second.size());
+  return auth::checkBearer(token, &value);
 }
 
 Status checkSessionName(const std::string& name) {
@@ -886,12 +906,19 @@ StatusOr<v1::SessionSummary> ObjectDatabaseService::summaryOf(LiveSession& sessi
 
 grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* ObjectDatabaseService::Ingest(
     grpc::CallbackServerContext* context) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return new RefusedCall<grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>>(
+        toGrpcStatus(allowed));
+  }
   return new IngestReactor(this, context);
 }
 
 grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServerContext* context,
                                                             const v1::EndSessionRequest* request,
                                                             v1::EndSessionResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
   const std::string& name = request->session_name();
   std::shared_ptr<LiveSession> session = liveSession(name);
   if (!session) {
@@ -984,6 +1011,9 @@ void ObjectDatabaseService::describe(const storage::SessionInfo& stored, v1::Ses
 grpc::ServerUnaryReactor* ObjectDatabaseService::ListSessions(
     grpc::CallbackServerContext* context, const v1::ListSessionsRequest* request,
     v1::ListSessionsResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
   auto after = parsePageToken(request->page_token(), 's', 0);
   if (!after.ok()) return finishUnary(context, after.status());
   auto stored = store_->sessions();
@@ -1005,6 +1035,9 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListSessions(
 grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServerContext* context,
                                                              const v1::ListObjectsRequest* request,
                                                              v1::ListObjectsResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
   const uint64_t filter = std::hash<std::string>()(request->session_name()) * 2 +
                           (request->include_merged() ? 1 : 0);
   auto after = parsePageToken(request->page_token(), 'o', filter);
@@ -1037,6 +1070,9 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServe
 grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerContext* context,
                                                            const v1::GetObjectRequest* request,
                                                            v1::ObjectDetail* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
   auto run = [&]() -> Status {
     if (request->id() == 0 || request->id() > uint64_t(INT64_MAX)) {
       return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
@@ -1134,6 +1170,9 @@ class SceneMeshReactor final : public grpc::ServerWriteReactor<v1::MeshChunk> {
 
 grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
     grpc::CallbackServerContext* context, const v1::GetSceneMeshRequest* request) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return new RefusedCall<grpc::ServerWriteReactor<v1::MeshChunk>>(toGrpcStatus(allowed));
+  }
   auto* reactor = new SceneMeshReactor();
   const std::string name = request->session_name();
   const bool completed = request->completed();
@@ -1186,6 +1225,9 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
 grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerContext* context,
                                                           const v1::GetStatsRequest*,
                                                           v1::GetStatsResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
   auto run = [&]() -> Status {
     OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
     OBJDB_ASSIGN_OR_RETURN(const storage::StoreStats stats, store_->stats());

@@ -55,6 +55,8 @@ struct ServiceOptions {
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size
   size_t max_send_message_bytes = 16 << 20;    // GetObject larger than this: RESOURCE_EXHAUSTED
   std::string version = "0.1.0";
+  // Every call must carry "authorization: Bearer <token>" (server/auth.h); empty = no token.
+  std::string token;
 };
 
 class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {

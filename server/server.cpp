@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/common/logging.h"
+#include "server/auth.h"
 #include "server/object_database_service.h"
 
 namespace objdb {
@@ -88,12 +89,23 @@ StatusOr<ListenAddress> parseListenAddress(const std::string& address) {
 Status ServerOptions::validate() const {
   StatusOr<ListenAddress> address = parseListenAddress(listen_address);
   if (!address.ok()) return annotate(address.status(), "listen_address");
-  if (!address->loopback && !allow_remote) {
+  if (tls_cert_file.empty() != tls_key_file.empty()) {
+    return absl::InvalidArgumentError(
+        "tls_cert_file and tls_key_file go together (--tls-cert with --tls-key)");
+  }
+  if (!tls_client_ca_file.empty() && tls_cert_file.empty()) {
+    return absl::InvalidArgumentError(
+        "tls_client_ca_file needs the server's own certificate (--tls-cert, --tls-key)");
+  }
+  const bool tls = !tls_cert_file.empty();
+  const bool authenticated = !token_file.empty() || !tls_client_ca_file.empty();
+  if (!address->loopback && !(tls && authenticated) && !allow_remote) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "listen_address \"", listen_address,
-        "\" is not a loopback address; the server has no authentication yet, so anyone who can "
-        "reach it could read and write the database: set allow_remote (--allow-remote) to "
-        "listen there anyway"));
+        "listen_address \"", listen_address, "\" is not a loopback address and the server has ",
+        !tls ? "no TLS (a token would cross the network in clear text)"
+             : "no token and no client certificates (anyone could read and write the database)",
+        ": use --tls-cert/--tls-key with --token-file or --tls-client-ca, or set allow_remote "
+        "(--allow-remote) to listen there anyway"));
   }
   if (db_path.empty()) return absl::InvalidArgumentError("db_path is empty");
   for (const auto& [name, value] :
@@ -134,6 +146,13 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
                          storage::SqliteStore::open(options.db_path));
 
   server::ServiceOptions service_options;
+  if (!options.token_file.empty()) {
+    OBJDB_ASSIGN_OR_RETURN(service_options.token, auth::readTokenFile(options.token_file));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      std::shared_ptr<grpc::ServerCredentials> credentials,
+      auth::serverCredentials(
+          {options.tls_cert_file, options.tls_key_file, options.tls_client_ca_file}));
   service_options.params = options.params;
   service_options.frame_queue = size_t(options.frame_queue);
   service_options.max_open_sessions = size_t(options.max_open_sessions);
@@ -145,9 +164,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   grpc::ServerBuilder builder;
   builder.RegisterService(service.get());
   int port = 0;
-  // Plaintext until the authentication issue (RELIABILITY.md R11) adds TLS and tokens; until
-  // then validate() keeps the server on loopback unless allow_remote is set.
-  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &port);
+  builder.AddListeningPort(options.listen_address, credentials, &port);
   builder.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
   builder.SetMaxSendMessageSize(options.max_send_message_bytes);
   // gRPC sets SO_REUSEPORT by default on Linux, which lets a second server bind a port that is
@@ -159,8 +176,9 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
     if (server != nullptr) server->Shutdown();
     return absl::UnavailableError(absl::StrCat(
         "cannot listen on ", options.listen_address,
-        ": the port is in use, the host is not an address of this machine, or binding it is not "
-        "permitted"));
+        ": the port is in use, the host is not an address of this machine, binding it is not "
+        "permitted", options.tls_cert_file.empty() ? "" : ", or the TLS certificate and key are "
+        "not valid PEM or do not belong together"));
   }
   if (grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService()) {
     health->SetServingStatus(true);
@@ -168,7 +186,12 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   }
   std::unique_ptr<ObjdbServer> result(new ObjdbServer(
       options, std::move(store), std::move(service), std::move(server), address.host, port));
-  logger("server")->info("listening on {}", result->address());
+  logger("server")->info(
+      "listening on {} ({}{})", result->address(),
+      options.tls_cert_file.empty()
+          ? "plaintext"
+          : (options.tls_client_ca_file.empty() ? "TLS" : "TLS, client certificates required"),
+      options.token_file.empty() ? "" : ", bearer token required");
   return result;
 }
 

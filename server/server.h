@@ -37,9 +37,19 @@ StatusOr<ListenAddress> parseListenAddress(const std::string& address);
 struct ServerOptions {
   // Where to listen, HOST:PORT; port 0 picks a free port (see ObjdbServer::port()).
   std::string listen_address = "127.0.0.1:50051";
-  // Without authentication (a later issue) only loopback addresses are accepted unless this is
-  // set: anyone who can reach the port can read and write the database.
+  // A non-loopback address needs TLS with a token or client certificates (below): otherwise
+  // anyone who can reach the port could read and write the database (or read the token on the
+  // wire). This accepts any address anyway.
   bool allow_remote = false;
+  // Bearer token (server/auth.h): when set, every objdb.v1.ObjectDatabase call must carry
+  // "authorization: Bearer <token>" or is refused with UNAUTHENTICATED. The health service stays
+  // open (it tells only whether the server is up). Read once at start.
+  std::string token_file;
+  // TLS: PEM certificate chain and key; with a client CA, clients must present a certificate it
+  // signed (mutual TLS). Empty = plaintext.
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  std::string tls_client_ca_file;
   // SQLite database file, opened at start (created if missing). A corrupt file, another
   // application's database or a newer schema stops the start with the reason (docs/storage.md).
   std::string db_path = "objdb.sqlite";

@@ -1,8 +1,12 @@
 // `objdb stream` and `objdb remote` against a loopback server: two sessions of the same tiny
 // scene streamed over gRPC build the database `objdb ingest` builds offline, and every query
-// action answers; bad arguments and an unreachable server are clear errors.
+// action answers; bad arguments and an unreachable server are clear errors. And both binaries
+// with TLS and a token: the clients get in only with both, and the token is never printed.
 #include <gtest/gtest.h>
 
+#include <signal.h>
+
+#include <chrono>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -12,6 +16,7 @@
 #include "storage/sqlite_store.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"
+#include "tests/support/test_pki.h"
 
 namespace objdb {
 namespace {
@@ -21,6 +26,7 @@ using testing::runProcess;
 namespace fs = std::filesystem;
 
 const std::string kObjdb = OBJDB_CLIENT_BINARY;
+const std::string kServerBinary = OBJDB_SERVER_BINARY;
 
 bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
@@ -134,6 +140,74 @@ TEST(StreamCommand, BadArgumentsAndAMissingServerAreClearErrors) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.err, "UNAVAILABLE")) << r.err;
   EXPECT_TRUE(contains(r.err, "is objdb-server running there?")) << r.err;
+}
+
+
+TEST(StreamCommand, WithTlsAndATokenOnlyClientsWithBothGetInAndTheTokenIsNeverPrinted) {
+  const testing::TestPki pki;
+  ASSERT_TRUE(pki.ok()) << pki.log();
+  testing::TempDir dir;
+  const std::string token = "f00dfeedcafe-objdb-cli-test-token-4711";
+  ASSERT_TRUE(testing::writeTextFile(dir / "token", token + "\n"));
+  ASSERT_TRUE(testing::writeTextFile(dir / "wrong", std::string(token.size(), 'x')));
+  ProcessResult r = runProcess({kObjdb, "sim", "--preset", "two-boxes", "--frames", "10",
+                                "--camera", "tango", "--out", (dir / "monday").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+
+  testing::ChildProcess server({kServerBinary, "--listen", "127.0.0.1:0", "--db",
+                                (dir / "db.sqlite").string(), "--token-file",
+                                (dir / "token").string(), "--tls-cert", pki.path("server.pem"),
+                                "--tls-key", pki.path("server.key"), "--log-level", "trace"});
+  ASSERT_TRUE(server.started());
+  ASSERT_TRUE(server.waitForStderr("bearer token required)", std::chrono::seconds(30)))
+      << server.stderrText();
+  const std::string log = server.stderrText();
+  const size_t at = log.find("listening on ") + std::string("listening on ").size();
+  const std::string address = log.substr(at, log.find(' ', at) - at);
+  ASSERT_TRUE(contains(address, "127.0.0.1:")) << log;
+
+  const std::vector<std::string> tls = {"--server", address, "--tls-ca", pki.path("ca.pem")};
+  auto with = [&](std::vector<std::string> args, const std::vector<std::string>& extra) {
+    args.insert(args.begin(), kObjdb);
+    args.insert(args.end(), extra.begin(), extra.end());
+    return runProcess(args);
+  };
+  std::string printed;  // everything the clients wrote
+  r = with({"remote", "stats"}, tls);
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "UNAUTHENTICATED")) << r.err;
+  EXPECT_TRUE(contains(r.err, "--token-file")) << r.err;
+  r = with({"remote", "stats", "--token-file", (dir / "wrong").string()}, tls);
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "UNAUTHENTICATED")) << r.err;
+  r = with({"remote", "stats", "--server", address, "--token-file", (dir / "token").string()}, {});
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 1) << "plaintext against TLS";
+  EXPECT_TRUE(contains(r.err, "UNAVAILABLE")) << r.err;
+
+  r = with({"stream", (dir / "monday").string(), "--token-file", (dir / "token").string()}, tls);
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_TRUE(contains(r.out, "10 frames acked (0 rejected)")) << r.out;
+  r = with({"remote", "stats", "--token-file", (dir / "token").string()}, tls);
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "sessions: 1 (0 streaming now), 10 frames integrated")) << r.out;
+  r = with({"health"}, tls);
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 0) << "health needs no token: " << r.err;
+  r = with({"remote", "stats", "--tls-cert", pki.path("client.pem")}, tls);
+  EXPECT_EQ(r.exit_code, 1) << "a certificate without its key is an error";
+  EXPECT_TRUE(contains(r.err, "--tls-cert with --tls-key")) << r.err;
+
+  ASSERT_TRUE(server.sendSignal(SIGTERM));
+  const ProcessResult stopped = server.wait(std::chrono::seconds(60));
+  EXPECT_EQ(stopped.exit_code, 0) << stopped.err;
+  EXPECT_TRUE(contains(stopped.err, "stopped serving")) << stopped.err;
+  EXPECT_FALSE(contains(stopped.err, token)) << "the server's log holds the token";
+  EXPECT_FALSE(contains(printed, token)) << "a client printed the token";
 }
 
 }  // namespace
