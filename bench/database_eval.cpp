@@ -285,10 +285,16 @@ int main(int argc, char** argv) {
                                    : "");
         for (const auto& c : report->results) {
           if (!relevant.count(c.model_id)) continue;
-          std::printf("    candidate model %lld: %s%s (e_TSDF %.1f mm, o_TSDF %zu)\n",
-                      (long long)c.model_id, c.accepted ? "accepted" : c.stage.c_str(),
-                      c.accepted ? "" : (": " + c.reason).c_str(),
-                      1000 * c.model_verdict.agreement.rmse, size_t(c.model_verdict.agreement.overlap));
+          // The TSDF numbers exist once registration succeeded (the model check ran).
+          const std::string numbers =
+              c.registration.accepted
+                  ? absl::StrFormat(" (e_TSDF %.1f mm, o_TSDF %d)",
+                                    1000 * c.model_verdict.agreement.rmse,
+                                    int64_t(c.model_verdict.agreement.overlap))
+                  : "";
+          std::printf("    candidate model %lld: %s%s%s\n", (long long)c.model_id,
+                      c.accepted ? "accepted" : c.stage.c_str(),
+                      c.accepted ? "" : (": " + c.reason).c_str(), numbers.c_str());
         }
       }
       planar += report->planar ? 1 : 0;

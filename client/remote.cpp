@@ -6,6 +6,8 @@
 #include <grpcpp/support/client_interceptor.h>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "server/address.h"
 
 namespace objdb::cli {
 
@@ -69,6 +71,15 @@ StatusOr<std::shared_ptr<grpc::Channel>> openChannel(const Connection& connectio
   arguments.SetMaxReceiveMessageSize(1024 * 1024 * 1024);  // the server's limit decides
   std::vector<std::unique_ptr<grpc::experimental::ClientInterceptorFactoryInterface>> interceptors;
   if (!connection.token_file.empty()) {
+    if (connection.tls.ca_file.empty()) {
+      // Without TLS the token crosses the wire in clear text: only to this machine.
+      const StatusOr<ListenAddress> address = parseListenAddress(connection.server);
+      if (!address.ok() || !address->loopback) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "--token-file without --tls-ca would send the token in clear text to ",
+            connection.server, ", which is not a loopback address: add --tls-ca FILE"));
+      }
+    }
     OBJDB_ASSIGN_OR_RETURN(std::string token, auth::readTokenFile(connection.token_file));
     interceptors.push_back(std::make_unique<BearerInterceptorFactory>(std::move(token)));
   }
@@ -93,7 +104,7 @@ int reportRpcError(const char* command, const std::string& what, const std::stri
                          "none)\n",
                  server.c_str());
   } else if (status.error_code() == grpc::StatusCode::UNAUTHENTICATED) {
-    std::fprintf(stderr, "  (the server wants its token: --token-file FILE)\n");
+    std::fprintf(stderr, "  (the token is missing or not the server's: --token-file FILE)\n");
   }
   return 1;
 }

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
@@ -80,8 +81,10 @@ Status checkBearer(const std::string& token, const std::string* authorization) {
         "this server requires a token: send the metadata \"authorization: Bearer <token>\" "
         "(objdb clients: --token-file FILE)");
   }
-  const std::string prefix = kBearerPrefix;
-  if (authorization->compare(0, prefix.size(), prefix) != 0 ||
+  // The scheme is case-insensitive (RFC 7235), the token is not.
+  const absl::string_view prefix = kBearerPrefix;
+  if (authorization->size() < prefix.size() ||
+      !absl::EqualsIgnoreCase(absl::string_view(*authorization).substr(0, prefix.size()), prefix) ||
       !constantTimeEquals(authorization->substr(prefix.size()), token)) {
     return absl::UnauthenticatedError("the bearer token of this call is not the server's token");
   }

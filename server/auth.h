@@ -5,7 +5,8 @@
 //
 // - Token: the file's content, surrounding whitespace removed, at least kMinTokenChars and at
 //   most kMaxTokenChars printable ASCII characters. A call carries it as the metadata
-//   "authorization: Bearer <token>". It is read from a file (never argv, where `ps` shows it),
+//   "authorization: Bearer <token>" (the scheme in any case). Clients send it in clear text only
+//   to a loopback address. It is read from a file (never argv, where `ps` shows it),
 //   compared in constant time and never logged or echoed in an error.
 // - TLS: PEM certificate chain + private key for the server; PEM CA bundle on the client. With
 //   a client CA on the server, a client must present a certificate that CA signed (mTLS).

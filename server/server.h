@@ -11,6 +11,7 @@
 
 #include "core/common/params.h"
 #include "core/common/status.h"
+#include "server/address.h"
 #include "storage/sqlite_store.h"
 
 namespace grpc {
@@ -22,17 +23,6 @@ namespace objdb {
 namespace server {
 class ObjectDatabaseService;
 }
-
-// A parsed HOST:PORT listen address.
-struct ListenAddress {
-  std::string host;       // as written, IPv6 with its brackets: "127.0.0.1", "localhost", "[::1]"
-  int port = 0;           // 0..65535; 0 = let the system choose (ephemeral port)
-  bool loopback = false;  // host is only reachable from this machine (127.0.0.0/8, ::1, localhost)
-};
-
-// Parses "HOST:PORT" where HOST is an IPv4 address, a bracketed IPv6 address or a DNS name.
-// Host names other than "localhost" count as remote (they may resolve to any interface).
-StatusOr<ListenAddress> parseListenAddress(const std::string& address);
 
 struct ServerOptions {
   // Where to listen, HOST:PORT; port 0 picks a free port (see ObjdbServer::port()).

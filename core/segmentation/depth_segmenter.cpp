@@ -26,9 +26,8 @@ int scaledWindow(int vga_window, int width) {
   return std::max(3, w | 1);
 }
 
-// The normal window W is split into a box filter of about W/3 (noise) and central differences
-// W/3 pixels apart (baseline): the footprint stays W wide while a silhouette contaminates only
-// the W/6 pixels next to it.
+// The normal window W is split into a box filter of about W/3 (noise, same-surface neighbours
+// only) and central differences W/3 pixels apart (baseline): the footprint stays W wide.
 int smoothingWindow(int normal_window) { return std::max(1, (normal_window / 3) | 1); }
 int differenceOffset(int normal_window) { return std::max(1, normal_window / 3); }
 
@@ -164,7 +163,8 @@ void accumulateSameSurface(const float* __restrict zc, const float* __restrict z
 // concave rim. Separable: along the rows, the window's points on the pixel's surface are summed;
 // down the columns, the row sums of the pixels on the pixel's surface. A diagonal neighbour
 // across a jump is excluded too: the row sum it belongs to is either of a pixel across the jump
-// (left out) or of a pixel on this surface, which left it out. Direct sums over the window
+// (left out) or of a pixel on this surface, which left it out — for jumps above about twice the
+// threshold (the test is relative to each centre pixel, so it is not transitive below that). Direct sums over the window
 // (2 × 5 taps at VGA), every loop branch-free so that it vectorises.
 void smoothPoints(const PointImage& points, int window, float max_relative_distance,
                   Planar3f* smoothed) {

@@ -198,6 +198,12 @@ TEST(StreamCommand, WithTlsAndATokenOnlyClientsWithBothGetInAndTheTokenIsNeverPr
   r = with({"health"}, tls);
   printed += r.out + r.err;
   EXPECT_EQ(r.exit_code, 0) << "health needs no token: " << r.err;
+  // A token is sent in clear text only to this machine.
+  r = with({"remote", "stats", "--server", "192.0.2.7:50051", "--token-file",
+            (dir / "token").string()}, {});
+  printed += r.out + r.err;
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "would send the token in clear text to 192.0.2.7:50051")) << r.err;
   r = with({"remote", "stats", "--tls-cert", pki.path("client.pem")}, tls);
   EXPECT_EQ(r.exit_code, 1) << "a certificate without its key is an error";
   EXPECT_TRUE(contains(r.err, "--tls-cert with --tls-key")) << r.err;

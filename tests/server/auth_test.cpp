@@ -98,8 +98,11 @@ TEST(CheckBearer, OnlyTheExactBearerTokenPasses) {
   const Status missing = auth::checkBearer(token, nullptr);
   EXPECT_EQ(missing.code(), absl::StatusCode::kUnauthenticated);
   EXPECT_TRUE(contains(std::string(missing.message()), "authorization: Bearer")) << missing;
+  const std::string lower_case_scheme = "bearer " + token;
+  EXPECT_TRUE(auth::checkBearer(token, &lower_case_scheme).ok()) << "RFC 7235: any case";
   for (const std::string& wrong :
-       {std::string("Bearer ") + token + "x", token, "bearer " + token, "Bearer  " + token,
+       {std::string("Bearer ") + token + "x", token, "Bearer  " + token, "Bearer" + token,
+        std::string("BEARER ") + std::string(token.size(), 'x'),
         std::string("Basic ") + token, std::string("Bearer "), std::string("")}) {
     const Status s = auth::checkBearer(token, &wrong);
     EXPECT_EQ(s.code(), absl::StatusCode::kUnauthenticated) << wrong;
