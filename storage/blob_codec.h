@@ -1,8 +1,9 @@
 // Blob codec of the SQLite store (issue 6): every binary column is a self-describing blob —
 // a 32-byte header {magic "ODBB", format version, kind, codec, payload sizes, CRC32 of the
 // stored payload} followed by the payload, raw or zstd-compressed. Decoding checks the magic,
-// version, kind, sizes (before any allocation) and checksum, so a damaged blob is an error that
-// names what is wrong, never garbage. SQLite cannot see inside row data (testing.html §4.2);
+// version, kind, sizes (before any allocation) and checksum, and decompresses in steps (memory
+// follows the real output, not the declared size), so a damaged blob is an error that names
+// what is wrong, never garbage. SQLite cannot see inside row data (testing.html §4.2);
 // these checks are how objdb notices a flipped byte.
 #pragma once
 

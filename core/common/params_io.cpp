@@ -157,7 +157,8 @@ Status applySection(const json& object, const std::string& section, Section* par
   });
   OBJDB_RETURN_IF_ERROR(status);
   if (known != object.size()) {
-    for (const auto& [key, value] : object.items()) {
+    for (const auto& item : object.items()) {
+      const std::string& key = item.key();  // (a structured binding: clang 14 cannot capture it)
       bool found = false;
       forEachField(*params, [&](const char* name, auto&) { found = found || key == name; });
       if (!found) {
@@ -175,12 +176,14 @@ Status applyParamsJson(absl::string_view text, Params* params) {
   json root;
   try {
     root = json::parse(text.begin(), text.end());
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for numbers like 1E99999
     return absl::InvalidArgumentError(absl::StrCat("config is not valid JSON: ", e.what()));
   }
   if (!root.is_object()) return absl::InvalidArgumentError("config must be a JSON object");
   Params updated = *params;
-  for (const auto& [key, value] : root.items()) {
+  for (const auto& item : root.items()) {
+    const std::string& key = item.key();
+    const json& value = item.value();
     Status status = absl::InvalidArgumentError(absl::StrCat(
         "unknown config section '", key,
         "' (known: segmentation, tsdf, gsm, model, keypoints, descriptors, matching, merging, "

@@ -214,7 +214,7 @@ StatusOr<Scene> parseSceneJson(absl::string_view text, const std::filesystem::pa
   json root;
   try {
     root = json::parse(text.begin(), text.end());
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, and out_of_range for numbers like 1E99999
     return absl::InvalidArgumentError(absl::StrCat("scene is not valid JSON: ", e.what()));
   }
   if (!root.is_object()) return fieldError("root", "expected a JSON object");

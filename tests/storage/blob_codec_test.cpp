@@ -1,6 +1,10 @@
 #include "storage/blob_codec.h"
 
+#include <sys/resource.h>
+
+#include <cstring>
 #include <limits>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -44,9 +48,13 @@ TEST(BlobCodec, EveryKindRoundTripsBitExact) {
   EXPECT_TRUE(decodeTransform(encodeTransform(T)).value().matrix() == T.matrix());
 }
 
+// Empty lists copy zero bytes from or to a null data(): fine only with the count-0 guard
+// (UBSan under -DOBJDB_SANITIZE=ON / scripts/fuzz.sh flags the unguarded memcpy).
 TEST(BlobCodec, EmptyValuesRoundTrip) {
   EXPECT_TRUE(decodePointCloud(encodePointCloud(PointCloud{})).value().points.empty());
   EXPECT_TRUE(decodeIndices(encodeIndices({})).value().empty());
+  EXPECT_TRUE(decodeLabelBlock(encodeLabelBlock({})).value().empty());
+  EXPECT_TRUE(decodeVoxelList(encodeVoxelList({})).value().empty());
   EXPECT_TRUE(decodeDescriptors(encodeDescriptors({})).value().empty());
   const auto grid = decodeTsdfGrid(encodeTsdfGrid(tsdf::TsdfLayer::create(0.01f, 16).value()));
   ASSERT_TRUE(grid.ok());
@@ -61,6 +69,26 @@ TEST(BlobCodec, CompressesTsdfGrids) {
   BlobOptions raw;
   raw.compress = false;
   EXPECT_LT(encodeTsdfGrid(sparse).size() * 5, encodeTsdfGrid(sparse, raw).size());
+}
+
+// Found by fuzzing (tests/fuzz/regressions/blob/declared-size-amplification): the header's
+// payload size (not covered by the CRC) was allocated before decompressing, so a small damaged
+// blob cost up to kMaxBlobPayloadBytes of memory. Now memory follows the stream's real output.
+TEST(BlobCodec, AnInflatedDeclaredSizeIsAnErrorWithoutAllocatingIt) {
+  std::string blob = encodeLabelBlock(std::vector<uint32_t>(4096, 7));  // compresses well
+  ASSERT_EQ(blob[8], char(BlobCodec::kZstd));
+  const uint64_t declared = kMaxBlobPayloadBytes;  // 512 MiB
+  std::memcpy(blob.data() + 16, &declared, sizeof(declared));
+  rusage before{};
+  getrusage(RUSAGE_SELF, &before);
+  const auto decoded = decodeLabelBlock(blob);
+  rusage after{};
+  getrusage(RUSAGE_SELF, &after);
+  ASSERT_FALSE(decoded.ok());
+  EXPECT_EQ(decoded.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(decoded.status().message(), HasSubstr("bytes, header says 536870912"));
+  // ru_maxrss is the peak in KiB: it must not have grown by anything like the declared size.
+  EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 64 * 1024) << "KiB of peak memory added";
 }
 
 TEST(BlobCodec, AFlippedPayloadByteIsAChecksumMismatch) {

@@ -54,6 +54,17 @@ TEST(ParamsJson, UnknownSectionIsNamed) {
   EXPECT_THAT(std::string(s.message()), HasSubstr("'tsfd'"));
 }
 
+// Found by fuzzing (tests/fuzz/regressions/config/json-number-overflow): the JSON parser
+// throws out_of_range, not parse_error, for a number beyond double; it aborted the process.
+TEST(ParamsJson, ANumberBeyondDoubleIsAnErrorNotACrash) {
+  Params p;
+  const Status s = applyParamsJson(R"({"tsdf": {"voxel_size_m": 1E99999}})", &p);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()), HasSubstr("not valid JSON"));
+  EXPECT_THAT(std::string(s.message()), HasSubstr("number overflow"));
+}
+
 TEST(ParamsJson, UnknownKeyIsNamed) {
   Params p;
   const Status s = applyParamsJson(R"({"tsdf": {"voxel_size": 0.01}})", &p);

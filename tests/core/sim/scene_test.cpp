@@ -59,6 +59,7 @@ TEST(Scene, BadFilesGiveErrorsNamingTheField) {
       {R"({"trajectory": {"keyframes": [{"position": [0,0,1], "look_at": [1,0,0]}]}})",
        "at least 2 keyframes"},
       {R"({"trajectory": {"frames": 0, "keyframes": []}})", "trajectory.frames"},
+      {R"({"depth_scale_m": 1E99999})", "not valid JSON"},  // threw out_of_range (a crash)
   };
   for (const auto& c : cases) {
     auto scene = parseSceneJson(c.json, ".");
