@@ -8,8 +8,11 @@
 # that says what it found (the minimisation never touches that folder).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-seconds=${1:-600}
-shift || true
+seconds=600
+if [[ $# -gt 0 && $1 =~ ^[0-9]+$ ]]; then
+  seconds=$1
+  shift
+fi
 targets=("$@")
 [[ ${#targets[@]} -gt 0 ]] || targets=(frame blob config)
 
@@ -42,7 +45,11 @@ for t in "${targets[@]}"; do
       "tests/fuzz/regressions/$t" \
       -max_total_time="$seconds" -timeout=1 -malloc_limit_mb=256 -rss_limit_mb=512 \
       -max_len=32768 \
-      -artifact_prefix="build-fuzz/crashes/$t/" -print_final_stats=1 2>&1 | tail -n 12
+      -artifact_prefix="build-fuzz/crashes/$t/" -print_final_stats=1 > "build-fuzz/crashes/$t/log" 2>&1 ||
+    { tail -n 60 "build-fuzz/crashes/$t/log"
+      echo "fuzz_$t found a problem: input and report in build-fuzz/crashes/$t/" >&2
+      exit 1; }
+  tail -n 8 "build-fuzz/crashes/$t/log"
   # Minimise into the committed corpus (merge keeps one input per new coverage feature).
   rm -rf "$work/min/$t" && mkdir -p "$work/min/$t"
   ASAN_OPTIONS=quarantine_size_mb=16 build-fuzz/bin/fuzz_"$t" -merge=1 "$work/min/$t" "tests/fuzz/corpus/$t" "$work/seeds/$t" \

@@ -13,6 +13,10 @@
 #include "absl/strings/str_format.h"
 
 namespace objdb::storage {
+
+// Largest zstd window a blob may use: levels up to 19 (BlobOptions) write at most 2^23.
+constexpr int kMaxZstdWindowLog = 23;
+
 namespace {
 
 static_assert(std::endian::native == std::endian::little,
@@ -245,14 +249,27 @@ StatusOr<std::string> decodeBlob(BlobKind expected, std::string_view blob) {
   // Streamed in 64 KiB steps: memory grows with what the stream really produces, never with
   // what a damaged header declares (found by fuzzing: a 100-byte blob declaring 256 MB made the
   // decoder allocate them up front). Output beyond the declared size stops the decoding.
-  std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> dctx(ZSTD_createDCtx(), &ZSTD_freeDCtx);
+  const unsigned long long content = ZSTD_getFrameContentSize(stored.data(), stored.size());
+  if (content == ZSTD_CONTENTSIZE_ERROR) return dataLoss(expected, "zstd: not a zstd frame");
+  if (content != ZSTD_CONTENTSIZE_UNKNOWN && content != h.payload_bytes) {
+    return dataLoss(expected, absl::StrFormat("zstd frame holds %d bytes, header says %d",
+                                              content, h.payload_bytes));
+  }
+  struct FreeDctx {
+    void operator()(ZSTD_DCtx* d) const { ZSTD_freeDCtx(d); }
+  };
+  std::unique_ptr<ZSTD_DCtx, FreeDctx> dctx(ZSTD_createDCtx());
   if (!dctx) return absl::ResourceExhaustedError("zstd: cannot create a decompression context");
+  // zstd sizes its window buffer from the frame header: cap it at what the encoder writes
+  // (levels ≤ 19 use at most 2^23), so a forged header cannot ask for 128 MiB.
+  ZSTD_DCtx_setParameter(dctx.get(), ZSTD_d_windowLogMax, kMaxZstdWindowLog);
   std::string payload;
-  std::vector<char> chunk(size_t(1) << 16);
+  const size_t chunk_size = size_t(std::clamp<uint64_t>(h.payload_bytes, 1, uint64_t(1) << 16));
+  std::unique_ptr<char[]> chunk(new char[chunk_size]);  // not zero-filled
   ZSTD_inBuffer in{stored.data(), stored.size(), 0};
   size_t remaining_in_frame = 1;
   while (remaining_in_frame != 0) {
-    ZSTD_outBuffer out{chunk.data(), chunk.size(), 0};
+    ZSTD_outBuffer out{chunk.get(), chunk_size, 0};
     remaining_in_frame = ZSTD_decompressStream(dctx.get(), &out, &in);
     if (ZSTD_isError(remaining_in_frame)) {
       return dataLoss(expected, absl::StrFormat("zstd: %s", ZSTD_getErrorName(remaining_in_frame)));
@@ -261,7 +278,7 @@ StatusOr<std::string> decodeBlob(BlobKind expected, std::string_view blob) {
       return dataLoss(expected, absl::StrFormat("decompresses to more than the %d bytes the header "
                                                 "says", h.payload_bytes));
     }
-    payload.append(chunk.data(), out.pos);
+    payload.append(chunk.get(), out.pos);
     if (remaining_in_frame != 0 && in.pos == in.size && out.pos < out.size) {
       return dataLoss(expected, "zstd: the stream ends inside its frame");
     }

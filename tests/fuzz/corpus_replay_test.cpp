@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -38,6 +39,7 @@ TEST(FuzzTargets, EverySeedIsAccepted) {
 TEST(FuzzTargets, DamagedSeedsAreRejectedNotCrashed) {
   for (const Target& target : targets()) {
     for (const std::string& seed : seeds(target.name)) {
+      if (seed.empty()) continue;  // EverySeedIsAccepted reports it
       // Truncations and a flipped byte in the middle: each is an error or, rarely, still valid.
       for (size_t keep : {size_t(0), size_t(1), seed.size() / 2, seed.size() - 1}) {
         (void)run(target, seed.substr(0, keep));

@@ -1,6 +1,7 @@
 #include "tests/fuzz/fuzz_targets.h"
 
 #include <cmath>
+#include <cstdint>
 #include <string_view>
 
 #include <opencv2/core.hpp>
@@ -101,7 +102,9 @@ std::string serialized(const v1::IngestRequest& request) {
 
 Outcome frame(const uint8_t* data, size_t size) {
   v1::IngestRequest request;
-  if (!request.ParseFromArray(data, int(size))) return Outcome::kRejected;
+  if (size > size_t(INT32_MAX) || !request.ParseFromArray(data, int(size))) {
+    return Outcome::kRejected;
+  }
   if (request.has_header()) {
     const v1::SessionHeader& header = request.header();
     const StatusOr<Intrinsics> k = server::fromProto(header.intrinsics(), "header.intrinsics");

@@ -14,7 +14,7 @@ namespace objdb::fuzz {
 enum class Outcome { kAccepted, kRejected };
 
 // Bytes → objdb.v1.IngestRequest (what a client sends on Ingest) → a header's intrinsics, pose
-// and parameter overrides, or a frame's pose, depth and colour decoded against Tango intrinsics.
+// and parameter overrides, or a frame's pose, depth and colour decoded against a 40 × 30 camera.
 Outcome frame(const uint8_t* data, size_t size);
 // The first byte picks a storage blob decoder (byte % 10) — and for whole blobs the kind expected
 // (byte / 10 % 8 + 1); the rest is either a whole blob (header checks: magic, version, kind,

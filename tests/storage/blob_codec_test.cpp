@@ -91,6 +91,20 @@ TEST(BlobCodec, AnInflatedDeclaredSizeIsAnErrorWithoutAllocatingIt) {
   EXPECT_LT(after.ru_maxrss - before.ru_maxrss, 64 * 1024) << "KiB of peak memory added";
 }
 
+// The decoder caps zstd's window (a forged frame header cannot make it allocate 128 MiB): the
+// strongest level the encoder accepts must still decode, on a payload larger than one window.
+TEST(BlobCodec, TheStrongestCompressionLevelStillDecodes) {
+  std::vector<uint32_t> labels(9 << 18);  // 9 MiB, more than the 8 MiB window
+  for (size_t i = 0; i < labels.size(); ++i) labels[i] = uint32_t(i / 64 % 5000);
+  BlobOptions strongest;
+  strongest.zstd_level = 19;
+  const std::string blob = encodeLabelBlock(labels, strongest);
+  ASSERT_EQ(blob[8], char(BlobCodec::kZstd));
+  const auto decoded = decodeLabelBlock(blob);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(*decoded, labels);
+}
+
 TEST(BlobCodec, AFlippedPayloadByteIsAChecksumMismatch) {
   const model::ObjectModel m = objdb::testing::makeStoreModel(11, 2);
   for (const bool compress : {false, true}) {
