@@ -102,6 +102,31 @@ const char* sessionStateName(SessionState state) {
   return "open";
 }
 
+namespace {
+
+// The scene caches: lists of (session, value), most recently used first.
+template <typename Value>
+std::optional<Value> cacheGet(std::list<std::pair<std::string, Value>>* cache,
+                              const std::string& key) {
+  for (auto it = cache->begin(); it != cache->end(); ++it) {
+    if (it->first == key) {
+      cache->splice(cache->begin(), *cache, it);
+      return cache->front().second;
+    }
+  }
+  return std::nullopt;
+}
+
+template <typename Value>
+void cachePut(std::list<std::pair<std::string, Value>>* cache, const std::string& key,
+              Value value, size_t max_entries) {
+  cache->remove_if([&key](const auto& entry) { return entry.first == key; });
+  cache->emplace_front(key, std::move(value));
+  while (cache->size() > max_entries) cache->pop_back();
+}
+
+}  // namespace
+
 Status SqliteStoreOptions::validate() const {
   if (synchronous != "FULL" && synchronous != "NORMAL") {
     return absl::InvalidArgumentError(
@@ -110,6 +135,10 @@ Status SqliteStoreOptions::validate() const {
   if (!(busy_timeout_ms >= 0 && busy_timeout_ms <= 600000)) {
     return absl::InvalidArgumentError(
         absl::StrFormat("storage.busy_timeout_ms must be in [0, 600000], got %d", busy_timeout_ms));
+  }
+  if (!(max_cached_scenes >= 1 && max_cached_scenes <= 1024)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "storage.max_cached_scenes must be in [1, 1024], got %d", max_cached_scenes));
   }
   if (!(max_readers >= 1 && max_readers <= 256)) {
     return absl::InvalidArgumentError(
@@ -729,8 +758,9 @@ Status SqliteStore::putScene(const std::string& session,
   };
   OBJDB_RETURN_IF_ERROR(annotate(body(), absl::StrFormat("storing the scene of session %s", session)));
   std::lock_guard cache_lock(scene_mutex_);
-  scene_cache_[session] = std::move(scene);
-  label_cache_[session] = std::move(labels);
+  const size_t max = size_t(options_.max_cached_scenes);
+  cachePut(&scene_cache_, session, std::move(scene), max);
+  cachePut(&label_cache_, session, std::move(labels), max);
   return absl::OkStatus();
 }
 
@@ -738,8 +768,7 @@ StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
     const std::string& session) const {
   {
     std::lock_guard lock(scene_mutex_);
-    const auto it = label_cache_.find(session);
-    if (it != label_cache_.end()) return it->second;
+    if (auto cached = cacheGet(&label_cache_, session)) return *cached;
   }
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(
@@ -771,7 +800,7 @@ StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
   std::shared_ptr<const gsm::LabelBlocks> out;
   if (!labels->empty()) out = std::move(labels);
   std::lock_guard lock(scene_mutex_);
-  label_cache_.emplace(session, out);
+  cachePut(&label_cache_, session, out, size_t(options_.max_cached_scenes));
   return out;
 }
 
@@ -779,8 +808,7 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
     const std::string& session) const {
   {
     std::lock_guard lock(scene_mutex_);
-    const auto it = scene_cache_.find(session);
-    if (it != scene_cache_.end()) return it->second;
+    if (auto cached = cacheGet(&scene_cache_, session)) return *cached;
   }
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
@@ -819,7 +847,8 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
   OBJDB_RETURN_IF_ERROR(snapshot.commit());
   auto shared = std::make_shared<const tsdf::TsdfLayer>(std::move(*layer));
   std::lock_guard lock(scene_mutex_);
-  scene_cache_.emplace(session, shared);
+  cachePut(&scene_cache_, session, std::shared_ptr<const tsdf::TsdfLayer>(shared),
+           size_t(options_.max_cached_scenes));
   return std::shared_ptr<const tsdf::TsdfLayer>(shared);
 }
 

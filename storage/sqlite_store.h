@@ -6,6 +6,7 @@
 // segments, models, observations and merge records; `check()` and `stats()` for the admin CLI.
 #pragma once
 
+#include <list>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -29,6 +30,9 @@ struct SqliteStoreOptions {
   int64_t journal_size_limit_bytes = 64ll << 20;  // WAL file is truncated to this after checkpoints
   bool quick_check_on_open = true;  // PRAGMA quick_check before first use; corrupt → DATA_LOSS
   int max_readers = 8;            // reader connections kept open (more are opened on demand)
+  // Decoded scene maps kept in memory (the most recently used; each a session's TSDF and labels,
+  // ~0.05-0.1 GB for a room at 2 cm). Older ones are decoded again from the file when needed.
+  int max_cached_scenes = 8;
   BlobOptions blobs;              // compression of new blobs
   Status validate() const;
 };
@@ -171,10 +175,11 @@ class SqliteStore : public database::ModelStore {
   std::optional<Connection> writer_;
   mutable std::mutex reader_mutex_;
   mutable std::vector<Connection> idle_readers_;
-  // Decoded scene maps (large; read by every model-to-scene check), dropped on putScene.
+  // Decoded scene maps (large; read by every model-to-scene check), replaced on putScene.
   mutable std::mutex scene_mutex_;
-  mutable std::map<std::string, std::shared_ptr<const tsdf::TsdfLayer>> scene_cache_;
-  mutable std::map<std::string, std::shared_ptr<const gsm::LabelBlocks>> label_cache_;
+  // Most recently used first; at most options_.max_cached_scenes entries each.
+  mutable std::list<std::pair<std::string, std::shared_ptr<const tsdf::TsdfLayer>>> scene_cache_;
+  mutable std::list<std::pair<std::string, std::shared_ptr<const gsm::LabelBlocks>>> label_cache_;
 };
 
 }  // namespace objdb::storage

@@ -5,8 +5,12 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <zlib.h>
+
 #include <atomic>
 #include <chrono>
+#include <filesystem>
+#include <fstream>
 #include <future>
 #include <memory>
 #include <string>
@@ -446,6 +450,102 @@ TEST(ObjectDatabaseService, BadFramesAreRejectedInTheirAckAndTheSessionCarriesOn
   EXPECT_EQ(testing::diffLayers(*with_bad, *without), "");
   EXPECT_TRUE(*server->store().sceneLabels("bad-frames").value() ==
               *server->store().sceneLabels("good-frames").value());
+}
+
+// Peak resident memory of this process (the server runs in it), KiB.
+long peakRssKib() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) return std::stol(line.substr(6));
+  }
+  return -1;
+}
+
+// A PNG whose header declares `width` x `height` (the IHDR chunk of a real 8x8 PNG rewritten,
+// its CRC recomputed); the pixel data stays that of 8x8.
+std::string pngDeclaring(bool grey16, uint32_t width, uint32_t height) {
+  testing::TempDir dir;
+  const std::filesystem::path path = dir / "small.png";
+  const Status written = grey16 ? io::writeUint16Png(path, Image<uint16_t>(8, 8, 1000))
+                                : io::writeColorPng(path, ColorImage(8, 8, Rgb8{1, 2, 3}));
+  EXPECT_TRUE(written.ok()) << written;
+  std::string png = io::internal::readFile(path).value();
+  auto put32 = [&png](size_t at, uint32_t v) {
+    for (int i = 0; i < 4; ++i) png[at + size_t(i)] = char((v >> (24 - 8 * i)) & 0xff);
+  };
+  put32(16, width);  // IHDR data starts at 16: width, height, ...
+  put32(20, height);
+  put32(29, uint32_t(crc32(0L, reinterpret_cast<const Bytef*>(png.data() + 12), 17)));
+  return png;
+}
+
+// RELIABILITY.md R7 (b), (c): sizes far beyond the session's are refused from the headers,
+// before anything of that size is allocated; the session carries on.
+TEST(ObjectDatabaseService, AmplifyingSizesAreRefusedBeforeAllocating) {
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  const Recording& r = twoBoxes();
+  Intrinsics huge = r.intrinsics;
+  huge.width = huge.height = 100000;
+  huge.cx = huge.cy = 50000.0;
+  const IngestResult refused = ingest(*stub, {header("huge", huge)});
+  EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.status.error_message().find("100000x100000"), std::string::npos)
+      << refused.status.error_message();
+
+  // The same session with five good frames, as the control: every ended session raises the
+  // peak a little (its map goes into the store's cache), so the refused frames must not add more
+  // than 16 MiB to what the control added.
+  v1::EndSessionResponse ended;
+  long before = peakRssKib();
+  std::vector<v1::IngestRequest> control = {header("control", r.intrinsics)};
+  for (int i = 0; i < 5; ++i) control.push_back(frame(r, i));
+  ASSERT_TRUE(ingest(*stub, control).status.ok());
+  ASSERT_TRUE(endSession(*stub, "control", &ended).ok());
+  const long control_added = peakRssKib() - before;
+
+  before = peakRssKib();
+  std::vector<v1::IngestRequest> requests = {header("amplifying", r.intrinsics), frame(r, 0)};
+  v1::IngestRequest f = frame(r, 1);
+  f.mutable_frame()->mutable_depth()->set_width(100000);  // the message says 100000 x 100000
+  f.mutable_frame()->mutable_depth()->set_height(100000);
+  requests.push_back(f);
+  f = frame(r, 2);
+  f.mutable_frame()->mutable_depth()->set_encoding(v1::DepthImage::PNG16);
+  f.mutable_frame()->mutable_depth()->set_metres_per_unit(0.001);
+  f.mutable_frame()->mutable_depth()->set_data(pngDeclaring(true, 60000, 60000));
+  requests.push_back(f);  // 7.2 GB of samples if decoded
+  f = frame(r, 3);
+  f.mutable_frame()->mutable_color()->set_encoding(v1::ColorImage::PNG);
+  f.mutable_frame()->mutable_color()->set_data(pngDeclaring(false, 60000, 60000));
+  requests.push_back(f);
+  f = frame(r, 4);
+  requests.push_back(f);  // and a good one
+  for (size_t i = 1; i < requests.size(); ++i) {
+    requests[i].mutable_frame()->set_index(i);
+    requests[i].mutable_frame()->set_timestamp_s(double(i));
+  }
+  const IngestResult result = ingest(*stub, requests);
+  ASSERT_TRUE(result.status.ok()) << result.status.error_message();
+  const auto acks = result.acks();
+  ASSERT_EQ(acks.size(), 5u);
+  EXPECT_TRUE(acks[0].accepted());
+  for (size_t k = 1; k <= 3; ++k) {
+    EXPECT_FALSE(acks[k].accepted()) << k;
+    EXPECT_EQ(acks[k].code(), int(grpc::StatusCode::INVALID_ARGUMENT)) << acks[k].reason();
+  }
+  EXPECT_NE(acks[1].reason().find("100000x100000"), std::string::npos) << acks[1].reason();
+  EXPECT_NE(acks[2].reason().find("60000x60000"), std::string::npos) << acks[2].reason();
+  EXPECT_NE(acks[3].reason().find("60000x60000"), std::string::npos) << acks[3].reason();
+  EXPECT_TRUE(acks[4].accepted()) << acks[4].reason();
+  ASSERT_TRUE(endSession(*stub, "amplifying", &ended).ok());
+  const long added = peakRssKib() - before;
+  ASSERT_GT(before, 0);
+  EXPECT_LT(added, control_added + 16 * 1024)
+      << "KiB of peak memory: " << added << " with the refused frames, " << control_added
+      << " for the control";
 }
 
 TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOne) {

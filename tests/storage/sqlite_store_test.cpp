@@ -227,6 +227,36 @@ TEST(SqliteStore, ScenesRoundTripPerBlockAndSurviveReopen) {
   EXPECT_EQ(diffLayers(*store->scene("monday").value(), smaller), "");
 }
 
+// The decoded-scene cache keeps the most recently used maps only: a long-lived server with many
+// sessions does not keep every map in memory. Evicted maps are decoded again, unchanged.
+TEST(SqliteStore, TheSceneCacheIsBoundedAndEvictedScenesReadBackUnchanged) {
+  TempDir dir;
+  SqliteStoreOptions options;
+  options.max_cached_scenes = 2;
+  auto opened = SqliteStore::open((dir / "db.sqlite").string(), options);
+  ASSERT_TRUE(opened.ok()) << opened.status();
+  auto& store = *opened;
+  std::vector<std::shared_ptr<const tsdf::TsdfLayer>> scenes;
+  for (int s = 0; s < 4; ++s) {
+    tsdf::TsdfLayer layer = tsdf::TsdfLayer::create(0.02f, 8).value();
+    layer.allocateBlock({s, 0, 0}).voxels()[size_t(s)].weight = 1.0f + float(s);
+    scenes.push_back(std::make_shared<const tsdf::TsdfLayer>(std::move(layer)));
+    ASSERT_TRUE(store->putScene("s" + std::to_string(s), scenes.back()).ok());
+  }
+  // Reads in an order that evicts and reloads each of them at least once.
+  for (int s : {0, 3, 1, 0, 2, 3, 1}) {
+    const auto loaded = store->scene("s" + std::to_string(s));
+    ASSERT_TRUE(loaded.ok()) << loaded.status();
+    ASSERT_NE(*loaded, nullptr) << s;
+    EXPECT_EQ(diffLayers(**loaded, *scenes[size_t(s)]), "") << s;
+  }
+  // The two most recent are served from memory: the very same object.
+  EXPECT_EQ(store->scene("s1").value().get(), store->scene("s1").value().get());
+  EXPECT_NE(store->scene("s0").value().get(), scenes[0].get()) << "s0 was evicted and decoded";
+  options.max_cached_scenes = 0;
+  EXPECT_FALSE(options.validate().ok());
+}
+
 TEST(SqliteStore, SessionsHaveALifecycle) {
   TempDir dir;
   auto store = openStore(dir / "db.sqlite");
