@@ -91,17 +91,21 @@ Status checkBearer(const std::string& token, const std::string* authorization) {
   return absl::OkStatus();
 }
 
+Status checkTlsServerFiles(const TlsServerFiles& files) {
+  if (files.cert_file.empty() != files.key_file.empty()) {
+    return absl::InvalidArgumentError(
+        "tls_cert_file and tls_key_file go together (--tls-cert with --tls-key)");
+  }
+  if (!files.client_ca_file.empty() && files.cert_file.empty()) {
+    return absl::InvalidArgumentError(
+        "tls_client_ca_file needs the server's own certificate (--tls-cert, --tls-key)");
+  }
+  return absl::OkStatus();
+}
+
 StatusOr<std::shared_ptr<grpc::ServerCredentials>> serverCredentials(const TlsServerFiles& files) {
-  if (files.cert_file.empty()) {
-    if (!files.key_file.empty() || !files.client_ca_file.empty()) {
-      return absl::InvalidArgumentError(
-          "a TLS key or client CA was given without a TLS certificate (--tls-cert)");
-    }
-    return grpc::InsecureServerCredentials();
-  }
-  if (files.key_file.empty()) {
-    return absl::InvalidArgumentError("a TLS certificate was given without its key (--tls-key)");
-  }
+  OBJDB_RETURN_IF_ERROR(checkTlsServerFiles(files));
+  if (files.cert_file.empty()) return grpc::InsecureServerCredentials();
   grpc::SslServerCredentialsOptions options(
       files.client_ca_file.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
                                    : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);

@@ -47,6 +47,10 @@ struct TlsServerFiles {
   std::string client_ca_file;  // PEM CA bundle: clients must present a certificate it signed
 };
 
+// Which files go together (certificate with key; a client CA only with both), without reading
+// them: the server's option check and serverCredentials both use it.
+Status checkTlsServerFiles(const TlsServerFiles& files);
+
 // Plaintext (no cert file) or TLS / mTLS server credentials from the PEM files. Errors name an
 // unreadable or empty file; gRPC itself rejects a key that does not match the certificate when
 // the listener starts.

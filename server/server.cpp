@@ -15,14 +15,8 @@ namespace objdb {
 Status ServerOptions::validate() const {
   StatusOr<ListenAddress> address = parseListenAddress(listen_address);
   if (!address.ok()) return annotate(address.status(), "listen_address");
-  if (tls_cert_file.empty() != tls_key_file.empty()) {
-    return absl::InvalidArgumentError(
-        "tls_cert_file and tls_key_file go together (--tls-cert with --tls-key)");
-  }
-  if (!tls_client_ca_file.empty() && tls_cert_file.empty()) {
-    return absl::InvalidArgumentError(
-        "tls_client_ca_file needs the server's own certificate (--tls-cert, --tls-key)");
-  }
+  OBJDB_RETURN_IF_ERROR(
+      auth::checkTlsServerFiles({tls_cert_file, tls_key_file, tls_client_ca_file}));
   const bool tls = !tls_cert_file.empty();
   const bool authenticated = !token_file.empty() || !tls_client_ca_file.empty();
   if (!address->loopback && !(tls && authenticated) && !allow_remote) {
