@@ -21,6 +21,7 @@ void forEachField(SegmentationParams& p, Fn&& fn) {
   fn("convexity_window_px", p.convexity_window_px);
   fn("convexity_threshold", p.convexity_threshold);
   fn("convexity_offset_m", p.convexity_offset_m);
+  fn("convexity_offset_per_m2", p.convexity_offset_per_m2);
   fn("min_segment_px", p.min_segment_px);
   fn("max_label_growth_distance_m", p.max_label_growth_distance_m);
   fn("label_growth_iterations", p.label_growth_iterations);

@@ -365,9 +365,13 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     merge.tsdf_rmse_m = best->model_verdict.agreement.rmse;
     merge.tsdf_overlap = best->model_verdict.agreement.overlap;
     merge.scene_checks = best->scene_checks;
-    for (const auto& o : merged.observations) segment_model_[keyOf(o)] = target.id;
+    std::vector<SegmentKey> keys;
+    for (const auto& o : merged.observations) keys.push_back(keyOf(o));
     MatchEntry entry = matchEntryOf(merged);
+    // What this object knows changes only once the store has the merge: a failed write (I/O
+    // error, full disk) leaves both as they were, and the insert can be retried.
     OBJDB_RETURN_IF_ERROR(store_->replaceModel(std::move(merged), merge));
+    for (const auto& key : keys) segment_model_[key] = target.id;
     changed(target.id, std::move(entry));
     report.model_id = target.id;
     report.merged = true;

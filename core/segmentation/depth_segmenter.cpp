@@ -335,7 +335,8 @@ void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
                     const float* __restrict pxj, const float* __restrict pyj,
                     const float* __restrict pzj, const float* __restrict nxj,
                     const float* __restrict nyj, const float* __restrict nzj, int count,
-                    float offset_m, float max_relative_jump, float* __restrict pair) {
+                    float offset_m, float offset_per_m2, float max_relative_jump,
+                    float* __restrict pair) {
   for (int t = 0; t < count; ++t) {
     const float e0 = pxj[t] - pxi[t], e1 = pyj[t] - pyi[t], e2 = pzj[t] - pzi[t];
     // A zero normal (unknown) has n_z == 0: normals toward the camera have n_z < 0 except at
@@ -346,7 +347,7 @@ void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
     const float bend = (nxj[t] - nxi[t]) * e0 + (nyj[t] - nyi[t]) * e1 + (nzj[t] - nzi[t]) * e2;
     // Chained selects: each compiles to a vector blend (with -fno-trapping-math).
     float value = nxi[t] * nxj[t] + nyi[t] * nyj[t] + nzi[t] * nzj[t];
-    value = bend < -offset_m ? value : 1.0f;
+    value = bend < -(offset_m + offset_per_m2 * pzi[t] * pzi[t]) ? value : 1.0f;
     value = std::abs(e2) <= max_relative_jump * pzi[t] ? value : 1.0f;
     value = nzi[t] != 0.0f ? value : 1.0f;
     value = nzj[t] != 0.0f ? value : 1.0f;
@@ -359,7 +360,8 @@ void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
 // 8-neighbourhood at distance k. Per row, the pair values go to `pair` first and are then
 // min-ed into both ends: every loop is branch-free and vectorises.
 void convexityPlanes(const Planar3f& P, const Planar3f& N, int w, int h, int window,
-                     float offset_m, float max_relative_jump, float* __restrict C) {
+                     float offset_m, float offset_per_m2, float max_relative_jump,
+                     float* __restrict C) {
   const int k = std::max(1, window / 2);
   std::fill(C, C + size_t(w) * size_t(h), 1.0f);
   thread_local std::vector<float> pair_storage;
@@ -383,7 +385,7 @@ void convexityPlanes(const Planar3f& P, const Planar3f& N, int w, int h, int win
       const size_t second = size_t(ptrdiff_t(first) + step);
       convexityPairs(px + first, py + first, pz + first, nx + first, ny + first, nz + first,
                      px + second, py + second, pz + second, nx + second, ny + second,
-                     nz + second, count, offset_m, max_relative_jump, pair);
+                     nz + second, count, offset_m, offset_per_m2, max_relative_jump, pair);
       float* __restrict ci = C + first;
       for (int t = 0; t < count; ++t) ci[t] = std::min(ci[t], pair[t]);
       float* __restrict cj = C + second;
@@ -492,13 +494,15 @@ void computeNormals(const PointImage& points, int window, float max_relative_dis
 }
 
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
-                  float offset_m, float max_relative_jump, Image<float>* convexity) {
+                  float offset_m, float offset_per_m2, float max_relative_jump,
+                  Image<float>* convexity) {
   const int w = points.width, h = points.height;
   resize(convexity, w, h, 1.0f);
   Planar3f p, n;
   toPlanes(points, &p);
   toPlanes(normals, &n);
-  convexityPlanes(p, n, w, h, window, offset_m, max_relative_jump, convexity->data.data());
+  convexityPlanes(p, n, w, h, window, offset_m, offset_per_m2, max_relative_jump,
+                  convexity->data.data());
 }
 
 DepthSegmenter::DepthSegmenter(const SegmentationParams& params, const Intrinsics& intrinsics)
@@ -568,8 +572,8 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   // Smoothed points: the tangent-plane test must not flip with per-pixel noise.
   resize(&convexity_, w, h, 1.0f);
   convexityPlanes(smoothed_, normals_, w, h, params_.convexity_window_px,
-                  params_.convexity_offset_m, params_.normal_max_relative_distance,
-                  convexity_.data.data());
+                  params_.convexity_offset_m, params_.convexity_offset_per_m2,
+                  params_.normal_max_relative_distance, convexity_.data.data());
   result.timings.convexity_ms = msSince(t);
 
   t = Clock::now();

@@ -49,10 +49,12 @@ void computeNormals(const PointImage& points, int window, float max_relative_dis
 
 // Min-convexity map in [−1, 1]: for each pixel, the minimum over its neighbours `window` / 2
 // pixels away in 8 directions of 1 where the pair is convex or flat, else (concave:
-// (n_j − n_i)·(p_j − p_i) < −offset_m, the normals converge) the dot product of the two normals. Pairs whose depths differ by more than `max_relative_jump` · z are skipped
-// (depth jumps are the discontinuity map's business).
+// (n_j − n_i)·(p_j − p_i) < −(offset_m + offset_per_m2 · z_i²), the normals converge) the dot
+// product of the two normals. Pairs whose depths differ by more than `max_relative_jump` · z are
+// skipped (depth jumps are the discontinuity map's business).
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
-                  float offset_m, float max_relative_jump, Image<float>* convexity);
+                  float offset_m, float offset_per_m2, float max_relative_jump,
+                  Image<float>* convexity);
 
 // Three float planes (x, y, z) of a w × h image: the segmenter's internal layout, which the
 // compiler can vectorise.

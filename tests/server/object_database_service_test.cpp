@@ -32,6 +32,7 @@
 #include "server/server.h"
 #include "tests/server/ingest_fixtures.h"
 #include "tests/storage/store_fixtures.h"
+#include "tests/support/faulty_vfs.h"
 #include "tests/server/loopback_server.h"
 #include "tests/support/temp_dir.h"
 
@@ -48,6 +49,7 @@ using testing::Recording;
 using testing::session;
 using testing::setDeadline;
 using testing::twoBoxes;
+using testing::FaultyVfs;
 
 using testing::loopbackOptions;
 using testing::scratchDbPath;
@@ -601,6 +603,69 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_ENDED);
   EXPECT_EQ(sessions.sessions(1).state(), v1::SESSION_STATE_ENDED);
   EXPECT_NE(server->store().scene("wednesday").value(), nullptr);
+}
+
+// RELIABILITY.md R4 at the service: the disk fails (every write, sync and truncate from then on)
+// while EndSession flushes a session into the database. EndSession answers UNAVAILABLE naming the
+// segment and what the store was doing; nothing crashes, and the session's map stays in memory.
+// Once the disk is back, EndSession again flushes it, and the database ends as a run without the
+// fault. The same server then takes a new session without a restart, and the file passes its
+// checks.
+TEST(ObjectDatabaseService, AFailingDiskFailsEndSessionAndNothingIsLostOnceTheDiskIsBack) {
+  constexpr size_t kFrames = 30;
+  std::vector<v1::ObjectSummary> expected;
+  {
+    auto server = startOrDie(loopbackOptions(scratchDbPath()));
+    ASSERT_NE(server, nullptr);
+    auto stub = stubFor(*server);
+    ASSERT_TRUE(ingest(*stub, session("monday", kFrames)).status.ok());
+    v1::EndSessionResponse ended;
+    ASSERT_TRUE(endSession(*stub, "monday", &ended).ok());
+    expected = listObjects(*stub);
+  }
+  ASSERT_GE(expected.size(), 2u);
+
+  FaultyVfs vfs;  // the store opens its connections through it
+  auto server = startOrDie(loopbackOptions(scratchDbPath()));
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  const IngestResult streamed = ingest(*stub, session("monday", kFrames));
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  // Fail every sync from the 2nd on (the first segment's raw segment is stored, its model is
+  // not), then every write, sync and truncate from the first on.
+  for (const auto& [k, ops] : {std::pair{2, FaultyVfs::kSync}, std::pair{1, FaultyVfs::kAllOps}}) {
+    vfs.failAt(k, /*persistent=*/true, ops);
+    v1::EndSessionResponse failed;
+    const grpc::Status status = endSession(*stub, "monday", &failed);
+    EXPECT_GE(vfs.failures(), 1);
+    vfs.lift();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+    EXPECT_NE(status.error_message().find("inserting segment"), std::string::npos)
+        << status.error_message();
+    EXPECT_NE(status.error_message().find("I/O error"), std::string::npos)
+        << status.error_message();
+  }
+  v1::EndSessionResponse ended;
+  const grpc::Status end = endSession(*stub, "monday", &ended);
+  ASSERT_TRUE(end.ok()) << end.error_message();
+  EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(ended.summary().counters().frames_integrated(), kFrames);
+  const auto objects = listObjects(*stub);
+  ASSERT_EQ(objects.size(), expected.size());
+  for (size_t i = 0; i < objects.size(); ++i) {
+    EXPECT_EQ(objects[i].num_poses(), expected[i].num_poses()) << i;
+    EXPECT_EQ(objects[i].planar(), expected[i].planar()) << i;
+  }
+  // A new session on the same server, without a restart.
+  const IngestResult tuesday = ingest(*stub, session("tuesday", 12));
+  ASSERT_TRUE(tuesday.status.ok()) << tuesday.status.error_message();
+  v1::EndSessionResponse tuesday_ended;
+  ASSERT_TRUE(endSession(*stub, "tuesday", &tuesday_ended).ok());
+  EXPECT_GT(tuesday_ended.summary().object_ids_size(), 0);
+  const auto report = server->store().check();
+  ASSERT_TRUE(report.ok()) << report.status();
+  EXPECT_TRUE(report->ok());
+  server->shutdown();
 }
 
 TEST(ObjectDatabaseService, ASessionLeftWithoutEndSessionIsEndedByTheServer) {

@@ -4,6 +4,7 @@
 
 #include "core/database/object_database.h"
 #include "storage/sqlite_store.h"
+#include "tests/support/faulty_vfs.h"
 #include "tests/support/object_scenes.h"
 #include "tests/support/temp_dir.h"
 
@@ -66,6 +67,82 @@ TEST(ObjectDatabaseOnSqlite, MatchesInMemoryAndCarriesOnAfterReopen) {
   EXPECT_TRUE(again->merged);
   EXPECT_EQ(store->modelIds().value().size(), 1u);
   EXPECT_EQ(store->model(1).value()->observations.size(), 2u);
+}
+
+// RELIABILITY.md R4 at the database level: Tuesday's insert, which merges into Monday's model,
+// meets a store whose k-th write, sync or truncate fails and keeps failing. It reports the error;
+// retried once the fault is lifted, it ends as an insert that never failed (one model holding
+// both segments, one merge record), and the file passes its checks.
+TEST(ObjectDatabaseOnSqlite, AnInsertThatFailsOnDiskEndsAsIfItNeverFailedWhenRetried) {
+  objdb::testing::FaultyVfs vfs;
+  const auto tuesday = [] { return objdb::testing::rawSegment(3, kTuesday, View{-0.1f, 0.3f}); };
+  const auto prepare = [&](const std::string& path, std::unique_ptr<SqliteStore>* store,
+                           std::unique_ptr<database::ObjectDatabase>* db) {
+    *store = SqliteStore::open(path).value();
+    ASSERT_TRUE((*store)->putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}))).ok());
+    ASSERT_TRUE((*store)->putScene("tuesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kTuesday}))).ok());
+    *db = database::ObjectDatabase::create(params(), store->get()).value();
+    ASSERT_TRUE((*db)->insertSegment("monday", objdb::testing::rawSegment(7, kMonday, View{-0.3f, 0.1f})).ok());
+  };
+  const auto expectMerged = [](const SqliteStore& store) {
+    const auto report = store.check();
+    ASSERT_TRUE(report.ok()) << report.status();
+    EXPECT_TRUE(report->ok());
+    ASSERT_EQ(store.modelIds().value(), std::vector<int64_t>{1});
+    EXPECT_EQ(store.model(1).value()->observations.size(), 2u);
+    EXPECT_EQ(store.mergeRecords().value().size(), 1u);
+  };
+
+  int64_t operations = 0;
+  {
+    objdb::testing::TempDir dir;
+    std::unique_ptr<SqliteStore> store;
+    std::unique_ptr<database::ObjectDatabase> db;
+    prepare((dir / "db.sqlite").string(), &store, &db);
+    vfs.failAt(0, false);
+    const auto second = db->insertSegment("tuesday", tuesday());
+    operations = vfs.operations();
+    vfs.lift();
+    ASSERT_TRUE(second.ok()) << second.status();
+    ASSERT_TRUE(second->merged);
+  }
+  ASSERT_GE(operations, 6) << "the insert stores the raw segment, then the merged model";
+
+  int failed = 0;
+  const int64_t step = std::max<int64_t>(1, operations / 10);
+  for (int64_t k = 1; k <= operations; k += step) {
+    SCOPED_TRACE(::testing::Message() << "operation " << k << " of " << operations);
+    objdb::testing::TempDir dir;
+    const std::string path = (dir / "db.sqlite").string();
+    std::unique_ptr<SqliteStore> store;
+    std::unique_ptr<database::ObjectDatabase> db;
+    prepare(path, &store, &db);
+    vfs.failAt(k, /*persistent=*/true);
+    auto second = db->insertSegment("tuesday", tuesday());
+    vfs.lift();
+    if (!second.ok()) {
+      ++failed;
+      EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable) << second.status();
+      second = db->insertSegment("tuesday", tuesday());
+      ASSERT_TRUE(second.ok()) << second.status();
+      // The failed insert left nothing of Tuesday's segment in any model to replace.
+      EXPECT_FALSE(second->replaced_earlier);
+    }
+    EXPECT_TRUE(second->merged);
+    expectMerged(*store);
+    // A database over the reopened file agrees: re-extracting Tuesday's segment replaces it.
+    db.reset();
+    store.reset();
+    store = SqliteStore::open(path).value();
+    expectMerged(*store);
+    db = database::ObjectDatabase::create(params(), store.get()).value();
+    const auto again = db->insertSegment("tuesday", tuesday());
+    ASSERT_TRUE(again.ok()) << again.status();
+    EXPECT_TRUE(again->replaced_earlier);
+    EXPECT_EQ(store->modelIds().value(), std::vector<int64_t>{1});
+    EXPECT_EQ(store->model(1).value()->observations.size(), 2u);
+  }
+  EXPECT_GE(failed, 5);
 }
 
 }  // namespace

@@ -265,6 +265,70 @@ TEST(DepthSegmenter, ConvexRidgeStaysOneSegment) {
   EXPECT_GE(double(result->segments[0].pixels.size()), 0.98 * double(k.width * k.height));
 }
 
+// Share of the valid pixels with depth in [z_min, z_max) that the convexity map marks concave.
+double concaveShare(const SegmentationMaps& maps, float threshold, float z_min, float z_max) {
+  size_t valid = 0, concave = 0;
+  for (size_t i = 0; i < maps.depth.data.size(); ++i) {
+    const float z = maps.depth.data[i];
+    if (!(z >= z_min && z < z_max)) continue;
+    ++valid;
+    if (maps.convexity.data[i] < threshold) ++concave;
+  }
+  EXPECT_GT(valid, 5000u) << z_min << ".." << z_max << " m";
+  return valid == 0 ? 0.0 : double(concave) / double(valid);
+}
+
+// Sensor noise grows with depth² (σ 2.6 cm at 4 m for the Kinect-like model): far away, a fixed
+// tangent-plane offset lets noise mark flat surfaces concave. The offset's z² term removes most
+// of those marks beyond 4 m, changes nothing near the camera, and a real concave valley with the
+// same noise still splits.
+TEST(DepthSegmenter, TheConvexityOffsetGrowsWithDepthSoNoiseFarAwayIsNotConcave) {
+  const sim::DepthNoiseParams noise;
+  const Intrinsics k = Intrinsics::vga();
+  // A wall turned 60° about the vertical axis, 3 m in front of the camera at the image centre:
+  // its depth runs from about 1 m to beyond 5 m across the image.
+  const TriangleMesh wall = sim::makePlane(12.0f, 12.0f);
+  Transform T_camera_wall = Transform::Identity();
+  T_camera_wall.linear() =
+      Eigen::AngleAxisd(60.0 / kDegPerRad, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  T_camera_wall.translation() = Eigen::Vector3d(0.0, 0.0, 3.0);
+  const RenderOutput frame =
+      render(k, {RenderInstance{&wall, T_camera_wall, 1}}, Transform::Identity(), &noise);
+
+  SegmentationParams fixed_offset;
+  fixed_offset.convexity_offset_per_m2 = 0.0f;
+  const SegmentationParams defaults;
+  ASSERT_GT(defaults.convexity_offset_per_m2, 0.0f);
+  double near_share[2], far_share[2];
+  for (int i = 0; i < 2; ++i) {
+    DepthSegmenter segmenter = makeSegmenter(k, i == 0 ? fixed_offset : defaults);
+    SegmentationMaps maps;
+    StatusOr<SegmentationResult> result = segmenter.segment(frame.depth, nullptr, &maps);
+    ASSERT_TRUE(result.ok()) << result.status();
+    near_share[i] = concaveShare(maps, defaults.convexity_threshold, 0.5f, 3.0f);
+    far_share[i] = concaveShare(maps, defaults.convexity_threshold, 4.0f, 100.0f);
+  }
+  EXPECT_GT(far_share[0], 0.01) << "noise should fake concave pixels far away with a fixed offset";
+  EXPECT_LT(far_share[1], 0.5 * far_share[0]) << far_share[0] << " -> " << far_share[1];
+  EXPECT_LT(near_share[0], 0.005);
+  EXPECT_LT(near_share[1], 0.005);
+
+  // The concave valley (edge 2.5 m away, planes reaching beyond 4 m) with the same noise.
+  const Hinge hinge;
+  const RenderOutput valley = render(k, hinge.instances(false), Transform::Identity(), &noise);
+  DepthSegmenter segmenter = makeSegmenter(k, defaults);
+  StatusOr<SegmentationResult> result = segmenter.segment(valley.depth);
+  ASSERT_TRUE(result.ok()) << result.status();
+  const Overlap overlap(result->labels, valley.instances);
+  std::set<uint16_t> majorities;
+  for (const Segment& s : result->segments) {
+    if (s.pixels.size() < size_t(k.width * k.height) / 20) continue;
+    EXPECT_GE(overlap.purity(s.label), 0.95) << overlap.describe();
+    majorities.insert(overlap.majority(s.label));
+  }
+  EXPECT_EQ(majorities, (std::set<uint16_t>{1, 2})) << overlap.describe();
+}
+
 TEST(DepthSegmenter, BigBoxSeenOnItsEdgeIsOneSegmentCoveringBothFaces) {
   const TriangleMesh box = sim::makeBox({2.0f, 2.0f, 2.0f});
   const Intrinsics k = Intrinsics::vga();
