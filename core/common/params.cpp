@@ -37,7 +37,7 @@ Status SegmentationParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(convexity_threshold, 0.0, 1.0, "segmentation.convexity_threshold"));
   OBJDB_RETURN_IF_ERROR(inRange(convexity_offset_m, 0.0, 1.0, "segmentation.convexity_offset_m"));
   OBJDB_RETURN_IF_ERROR(
-      inRange(convexity_offset_per_m2, 0.0, 1.0, "segmentation.convexity_offset_per_m2"));
+      inRange(convexity_offset_per_m2, 0.0, 0.01, "segmentation.convexity_offset_per_m2"));
   OBJDB_RETURN_IF_ERROR(inRange(min_segment_px, 1, 1 << 24, "segmentation.min_segment_px"));
   return inRange(max_label_growth_distance_m, 0.0, 10.0,
                  "segmentation.max_label_growth_distance_m");

@@ -369,7 +369,9 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     for (const auto& o : merged.observations) keys.push_back(keyOf(o));
     MatchEntry entry = matchEntryOf(merged);
     // What this object knows changes only once the store has the merge: a failed write (I/O
-    // error, full disk) leaves both as they were, and the insert can be retried.
+    // error, full disk) leaves the target model as it was, and the insert can be retried. (A
+    // re-extracted segment's earlier contribution was removed above, in its own transaction;
+    // after a failed write it stays removed until the retry.)
     OBJDB_RETURN_IF_ERROR(store_->replaceModel(std::move(merged), merge));
     for (const auto& key : keys) segment_model_[key] = target.id;
     changed(target.id, std::move(entry));

@@ -98,7 +98,7 @@ TEST(ObjectDatabaseOnSqlite, AnInsertThatFailsOnDiskEndsAsIfItNeverFailedWhenRet
     objdb::testing::TempDir dir;
     std::unique_ptr<SqliteStore> store;
     std::unique_ptr<database::ObjectDatabase> db;
-    prepare((dir / "db.sqlite").string(), &store, &db);
+    ASSERT_NO_FATAL_FAILURE(prepare((dir / "db.sqlite").string(), &store, &db));
     vfs.failAt(0, false);
     const auto second = db->insertSegment("tuesday", tuesday());
     operations = vfs.operations();
@@ -108,7 +108,7 @@ TEST(ObjectDatabaseOnSqlite, AnInsertThatFailsOnDiskEndsAsIfItNeverFailedWhenRet
   }
   ASSERT_GE(operations, 6) << "the insert stores the raw segment, then the merged model";
 
-  int failed = 0;
+  int failed = 0, failed_in_merge = 0;
   const int64_t step = std::max<int64_t>(1, operations / 10);
   for (int64_t k = 1; k <= operations; k += step) {
     SCOPED_TRACE(::testing::Message() << "operation " << k << " of " << operations);
@@ -116,13 +116,17 @@ TEST(ObjectDatabaseOnSqlite, AnInsertThatFailsOnDiskEndsAsIfItNeverFailedWhenRet
     const std::string path = (dir / "db.sqlite").string();
     std::unique_ptr<SqliteStore> store;
     std::unique_ptr<database::ObjectDatabase> db;
-    prepare(path, &store, &db);
+    ASSERT_NO_FATAL_FAILURE(prepare(path, &store, &db));
     vfs.failAt(k, /*persistent=*/true);
     auto second = db->insertSegment("tuesday", tuesday());
     vfs.lift();
     if (!second.ok()) {
       ++failed;
       EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable) << second.status();
+      // The raw segment was stored and the merged model was not.
+      if (second.status().message().find("replacing object model") != absl::string_view::npos) {
+        ++failed_in_merge;
+      }
       second = db->insertSegment("tuesday", tuesday());
       ASSERT_TRUE(second.ok()) << second.status();
       // The failed insert left nothing of Tuesday's segment in any model to replace.
@@ -143,6 +147,7 @@ TEST(ObjectDatabaseOnSqlite, AnInsertThatFailsOnDiskEndsAsIfItNeverFailedWhenRet
     EXPECT_EQ(store->model(1).value()->observations.size(), 2u);
   }
   EXPECT_GE(failed, 5);
+  EXPECT_GE(failed_in_merge, 1) << "no sampled fault hit the merge itself";
 }
 
 }  // namespace

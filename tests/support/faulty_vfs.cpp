@@ -133,20 +133,38 @@ int fileUnfetch(sqlite3_file* f, sqlite3_int64 offset, void* p) {
   return real->pMethods->xUnfetch(real, offset, p);
 }
 
+// With shared memory (WAL) and memory-mapped reads, for real files that have them.
 const sqlite3_io_methods kMethods = {
     3,                          fileClose,          fileRead,         fileWrite,
     fileTruncate,               fileSync,           fileSize,         fileLock,
     fileUnlock,                 fileCheckReservedLock, fileControl,   fileSectorSize,
     fileDeviceCharacteristics,  fileShmMap,         fileShmLock,      fileShmBarrier,
     fileShmUnmap,               fileFetch,          fileUnfetch};
+// Without them: SQLite then knows that WAL is not possible on the file, as with the real one.
+const sqlite3_io_methods kMethodsV1 = {
+    1,                          fileClose,          fileRead,         fileWrite,
+    fileTruncate,               fileSync,           fileSize,         fileLock,
+    fileUnlock,                 fileCheckReservedLock, fileControl,   fileSectorSize,
+    fileDeviceCharacteristics,  nullptr,            nullptr,          nullptr,
+    nullptr,                    nullptr,            nullptr};
 
 int vfsOpen(sqlite3_vfs*, sqlite3_filename name, sqlite3_file* file, int flags, int* out_flags) {
   auto* ours = reinterpret_cast<FaultyFile*>(file);
   ours->real = reinterpret_cast<sqlite3_file*>(reinterpret_cast<char*>(file) + kHeaderBytes);
   ours->real->pMethods = nullptr;
   const int rc = g_real->xOpen(g_real, name, ours->real, flags, out_flags);
-  // SQLite calls xClose only when pMethods is set: mirror the real file's state.
-  ours->base.pMethods = ours->real->pMethods != nullptr ? &kMethods : nullptr;
+  const sqlite3_io_methods* real_methods = ours->real->pMethods;
+  if (rc != SQLITE_OK) {
+    // SQLite expects no methods on a file that failed to open (it will not close it).
+    if (real_methods != nullptr) real_methods->xClose(ours->real);
+    ours->real->pMethods = nullptr;
+    ours->base.pMethods = nullptr;
+    return rc;
+  }
+  const bool shared_memory = real_methods != nullptr && real_methods->iVersion >= 2 &&
+                             real_methods->xShmMap != nullptr;
+  ours->base.pMethods =
+      real_methods == nullptr ? nullptr : (shared_memory ? &kMethods : &kMethodsV1);
   return rc;
 }
 

@@ -280,8 +280,8 @@ double concaveShare(const SegmentationMaps& maps, float threshold, float z_min, 
 
 // Sensor noise grows with depth² (σ 2.6 cm at 4 m for the Kinect-like model): far away, a fixed
 // tangent-plane offset lets noise mark flat surfaces concave. The offset's z² term removes most
-// of those marks beyond 4 m, changes nothing near the camera, and a real concave valley with the
-// same noise still splits.
+// of those marks beyond 4 m, leaves few either way near the camera, and a real concave valley
+// with the same noise still splits.
 TEST(DepthSegmenter, TheConvexityOffsetGrowsWithDepthSoNoiseFarAwayIsNotConcave) {
   const sim::DepthNoiseParams noise;
   const Intrinsics k = Intrinsics::vga();
