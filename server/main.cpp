@@ -50,6 +50,9 @@ options:
                           1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
   --auto-end-s N          end a session whose stream closed or broke after N seconds without
                           EndSession (its map is stored); 0 = never (default 600)
+  --save-map-s S          save each open session's map every S seconds, so that a crash loses
+                          only the frames after the last save (the next start ends the session
+                          from it); 0 = never (default 60)
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 
@@ -144,6 +147,17 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       int seconds = 0;
       if (!take_int(0, 7 * 24 * 3600, &seconds)) return false;
       cli->options.auto_end_after = std::chrono::seconds(seconds);
+    } else if (arg == "--save-map-s") {
+      std::string text;
+      if (!take_value(&text)) return false;
+      double seconds = 0.0;
+      if (!absl::SimpleAtod(text, &seconds) || !(seconds >= 0.0 && seconds <= 24 * 3600.0)) {
+        *error = absl::StrFormat("%s must be a number of seconds in [0, 86400], got \"%s\"", arg,
+                                 text);
+        return false;
+      }
+      cli->options.save_map_every =
+          std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
     } else if (arg == "--max-sessions") {
       if (!take_int(1, objdb::kMaxOpenSessions, &cli->options.max_open_sessions)) return false;
     } else if (arg == "--log-level") {

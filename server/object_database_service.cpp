@@ -1,6 +1,8 @@
 #include "server/object_database_service.h"
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <filesystem>
@@ -116,6 +118,23 @@ uint32_t pageSize(uint32_t requested) {
   return requested == 0 ? kDefaultPageSize : std::min(requested, kMaxPageSize);
 }
 
+// Whether a stored raw segment covers exactly the map voxels of `segment` (both in world voxel
+// indices): then re-inserting it would change nothing.
+bool sameVoxels(const database::RawSegmentRecord& stored, const gsm::RawSegment& segment) {
+  if (stored.voxels.size() != segment.label_voxels.size() || stored.grid == nullptr) return false;
+  const double voxel = double(segment.grid.voxelSize());
+  const auto originOf = [voxel](const Transform& T) -> Eigen::Vector3i {
+    return (T.translation() / voxel).array().round().cast<int>();
+  };
+  const Eigen::Vector3i a = originOf(stored.T_world_segment), b = originOf(segment.T_world_segment);
+  std::vector<std::array<int, 3>> x, y;
+  for (const auto& v : stored.voxels) x.push_back({v.x() + a.x(), v.y() + a.y(), v.z() + a.z()});
+  for (const auto& v : segment.label_voxels) y.push_back({v.x() + b.x(), v.y() + b.y(), v.z() + b.z()});
+  std::sort(x.begin(), x.end());
+  std::sort(y.begin(), y.end());
+  return x == y;
+}
+
 int64_t fileBytes(const std::string& path) {
   int64_t total = 0;
   for (const char* suffix : {"", "-wal", "-shm"}) {
@@ -170,6 +189,10 @@ struct LiveSession {
   bool end_queued = false;  // the server queued its own end (idle too long, or stopping)
   // Database jobs to queue when the frame worker is done (EndSession of an interrupted stream).
   std::vector<std::function<void()>> after_stream;
+
+  // Saving the map (maybeSaveMap): the frame worker's clock, and a save waiting in the queue.
+  std::chrono::steady_clock::time_point map_saved_at{};
+  std::atomic<bool> map_save_pending{false};
 
   v1::SessionCounters snapshot() {
     std::lock_guard lock(mutex);
@@ -346,18 +369,85 @@ StatusOr<std::unique_ptr<ObjectDatabaseService>> ObjectDatabaseService::create(
   OBJDB_RETURN_IF_ERROR(options.params.validate());
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<database::ObjectDatabase> db,
                          database::ObjectDatabase::create(options.params, store));
-  // Sessions a stopped server left open lost their maps with it.
+  // Sessions a stopped server did not end: those with a saved map are ended from it (on the
+  // database thread, while the server serves); the others lost their maps.
   OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> sessions, store->sessions());
+  std::vector<storage::SessionInfo> to_recover;
   for (const auto& s : sessions) {
+    if (s.state == storage::SessionState::kEnded) continue;
+    OBJDB_ASSIGN_OR_RETURN(const int64_t saved_frames, store->savedMapFrames(s.name));
+    if (saved_frames >= 0) to_recover.push_back(s);
     if (s.state != storage::SessionState::kOpen) continue;
-    logger("server")->warn("session {} was still open when the server last stopped; its map is "
-                           "lost (segments inserted before stay): marking it interrupted",
-                           s.name);
+    if (saved_frames < 0) {
+      logger("server")->warn("session {} was still open when the server last stopped and has no "
+                             "saved map; its map is lost (segments inserted before stay): "
+                             "marking it interrupted",
+                             s.name);
+    }
+    // Interrupted at once (it streams no more), whatever its recovery below does.
     OBJDB_RETURN_IF_ERROR(
         store->finishSession(s.name, storage::SessionState::kInterrupted, s.frames));
   }
-  return std::unique_ptr<ObjectDatabaseService>(
+  std::unique_ptr<ObjectDatabaseService> service(
       new ObjectDatabaseService(options, store, std::move(db)));
+  for (const auto& s : to_recover) {
+    service->recovering_.insert(s.name);
+    service->database_queue_->push([service = service.get(), s] {
+      const Status recovered = service->recoverSession(s);
+      if (!recovered.ok()) {
+        logger("server")->error("session {} could not be ended from its saved map (tried again "
+                                "at the next start): {}",
+                                s.name, std::string(recovered.message()));
+      }
+      std::lock_guard lock(service->mutex_);
+      service->recovering_.erase(s.name);
+    });
+  }
+  return service;
+}
+
+Status ObjectDatabaseService::recoverSession(const storage::SessionInfo& stored) {
+  OBJDB_ASSIGN_OR_RETURN(const storage::SavedMap saved, store_->savedMap(stored.name));
+  if (saved.map == nullptr) return absl::OkStatus();
+  Params params = options_.params;
+  if (Status applied = applyParamsJson(stored.params_json, &params); !applied.ok()) {
+    params = options_.params;
+  }
+  logger("server")->warn("session {} was not ended when the server last stopped: ending it from "
+                         "its map saved after {} frames (the frames after it are lost)",
+                         stored.name, saved.frames);
+  const gsm::LabelBlocks no_labels;
+  const std::vector<gsm::RawSegment> segments = gsm::extractLabelled(
+      *saved.map, saved.labels ? *saved.labels : no_labels, params.gsm.min_label_voxels,
+      int(std::ceil(params.tsdf.truncation_voxels)), saved.frames);
+  size_t inserted = 0, unchanged = 0;
+  for (const gsm::RawSegment& segment : segments) {
+    // A label extracted (and inserted) before the save and not changed since is already there.
+    auto earlier = store_->rawSegment({stored.name, segment.label});
+    if (earlier.ok() && sameVoxels(**earlier, segment)) {
+      ++unchanged;
+      continue;
+    }
+    if (!earlier.ok() && !absl::IsNotFound(earlier.status())) return earlier.status();
+    auto report = db_->insertSegment(stored.name, segment);
+    if (!report.ok()) {
+      if (absl::IsFailedPrecondition(report.status()) ||
+          absl::IsInvalidArgument(report.status())) {
+        continue;  // a segment the database cannot take (no surface at the mesh weight)
+      }
+      return annotate(report.status(), absl::StrFormat("inserting segment %d of session %s",
+                                                       segment.label, stored.name));
+    }
+    ++inserted;
+  }
+  OBJDB_RETURN_IF_ERROR(store_->putScene(stored.name, saved.map, saved.labels));
+  OBJDB_RETURN_IF_ERROR(
+      store_->finishSession(stored.name, storage::SessionState::kInterrupted, saved.frames));
+  OBJDB_RETURN_IF_ERROR(store_->dropSavedMap(stored.name));
+  logger("server")->info("session {} ended from its saved map: {} frames, {} segments inserted, "
+                         "{} unchanged since they were inserted; state interrupted",
+                         stored.name, saved.frames, inserted, unchanged);
+  return absl::OkStatus();
 }
 
 ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
@@ -733,6 +823,48 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
   std::vector<RawSegmentJob> jobs =
       jobsOf(session, session.map->extractIdle(), v1::SegmentExtracted::IDLE);
   if (!jobs.empty()) queueInserts(stream_ptr->session, stream_ptr, std::move(jobs), true);
+  maybeSaveMap(stream_ptr->session);
+}
+
+void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& session) {
+  if (options_.save_map_every.count() <= 0) return;
+  const auto now = std::chrono::steady_clock::now();
+  if (session->map_saved_at == std::chrono::steady_clock::time_point{}) {
+    session->map_saved_at = now;  // the first frame starts the clock
+    return;
+  }
+  if (now - session->map_saved_at < options_.save_map_every || session->map_save_pending) return;
+  session->map_saved_at = now;
+  session->map_save_pending = true;
+  auto map = std::make_shared<const tsdf::TsdfLayer>(session->map->tsdf().clone());
+  auto labels = std::make_shared<const gsm::LabelBlocks>(session->map->mainLabelBlocks());
+  const int64_t frames = session->map->frames();
+  const double copy_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - now).count();
+  // Behind the inserts queued before it (waiting when the queue is full, like them).
+  database_queue_->pushWaiting([this, session, map, labels, frames, copy_ms] {
+    bool ended = false;
+    {
+      std::lock_guard lock(session->mutex);
+      ended = session->state == v1::SESSION_STATE_ENDED;
+    }
+    if (!ended) {
+      const auto start = std::chrono::steady_clock::now();
+      const Status saved = store_->putSavedMap(session->name, frames, *map, *labels);
+      if (saved.ok()) {
+        logger("server")->info(
+            "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms by the frame "
+            "worker, written in {:.0f} ms)",
+            session->name, frames, map->numBlocks(), copy_ms,
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                .count());
+      } else {
+        logger("server")->warn("session {}: saving its map failed (a crash would lose more): {}",
+                               session->name, std::string(saved.message()));
+      }
+    }
+    session->map_save_pending = false;
+  });
 }
 
 std::vector<RawSegmentJob> jobsOf(const LiveSession& session, std::vector<gsm::RawSegment> segments,
@@ -926,7 +1058,28 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
     if (!stored.ok()) return finishUnary(context, stored.status());
     for (const auto& s : *stored) {
       if (s.name != name) continue;
+      bool recovering = false;
+      {
+        std::lock_guard lock(mutex_);
+        recovering = recovering_.count(name) > 0;
+      }
+      if (recovering) {
+        return finishUnary(context, absl::UnavailableError(absl::StrFormat(
+                                        "session %s was not ended before the server stopped and "
+                                        "is being ended from its saved map; try again shortly",
+                                        name)));
+      }
       if (s.state != storage::SessionState::kEnded) {
+        auto scene = store_->scene(name);
+        if (!scene.ok()) return finishUnary(context, scene.status());
+        if (*scene != nullptr) {
+          return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
+                                          "session %s was not ended before the server stopped; "
+                                          "it was ended at the next start from its map saved "
+                                          "after %d frames (its segments are in the database, "
+                                          "its scene is stored); the frames after it were lost",
+                                          name, s.frames)));
+        }
         return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
                                         "session %s was not ended before the server stopped; "
                                         "its map was not kept (the segments inserted before are "

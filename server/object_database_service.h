@@ -24,6 +24,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -50,6 +51,9 @@ struct ServiceOptions {
   // A session whose stream closed or broke and that gets no EndSession for this long is ended by
   // the server (map stored, segments inserted). 0 = never.
   std::chrono::milliseconds auto_end_after{10 * 60 * 1000};
+  // An open session's map (TSDF + main labels) is saved this often, so that a crash loses only
+  // the frames after the last save: the next start ends the session from it. 0 = never.
+  std::chrono::milliseconds save_map_every{60 * 1000};
   size_t segment_queue = 64;        // segments waiting for the database before frame work waits
   int integration_threads = 2;      // TSDF integration threads per session
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size
@@ -111,6 +115,12 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // the database queue; an interrupted session is stored as such (on the database thread).
   void endStreaming(const std::shared_ptr<LiveSession>& session, bool interrupted);
   void processFrame(const std::shared_ptr<IngestStream>& stream, const v1::Frame& frame);
+  // Every save_map_every (frame worker): a copy of the map to the database thread, which saves
+  // it; skipped while the previous save is still waiting.
+  void maybeSaveMap(const std::shared_ptr<LiveSession>& session);
+  // Database thread, at start: a session a stopped server left not ended, with a saved map, gets
+  // that map's segments inserted and its scene stored, and stays INTERRUPTED.
+  Status recoverSession(const storage::SessionInfo& stored);
   // Queues the database insert of each segment (frame workers wait when the queue is full; they
   // insert what they extracted even when their stream was cancelled: nothing extracted is lost).
   void queueInserts(const std::shared_ptr<LiveSession>& session,
@@ -137,6 +147,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
 
   std::mutex mutex_;  // guards sessions_, workers_, stopped_
   std::map<std::string, std::shared_ptr<LiveSession>> sessions_;
+  std::set<std::string> recovering_;  // sessions whose saved maps are still being ended
   struct Worker {
     std::thread thread;
     std::shared_ptr<std::atomic<bool>> finished;

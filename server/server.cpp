@@ -51,6 +51,11 @@ Status ServerOptions::validate() const {
         absl::StrFormat("auto_end_after is %d ms, must be in [0, one week]",
                         static_cast<int64_t>(auto_end_after.count())));
   }
+  if (save_map_every.count() < 0 || save_map_every > std::chrono::hours(24)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("save_map_every is %d ms, must be in [0, one day]",
+                        static_cast<int64_t>(save_map_every.count())));
+  }
   if (frame_queue < 1 || frame_queue > 1024) {
     return absl::InvalidArgumentError(
         absl::StrFormat("frame_queue is %d frames, must be in [1, 1024]", frame_queue));
@@ -77,6 +82,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   service_options.frame_queue = size_t(options.frame_queue);
   service_options.max_open_sessions = size_t(options.max_open_sessions);
   service_options.auto_end_after = options.auto_end_after;
+  service_options.save_map_every = options.save_map_every;
   service_options.max_send_message_bytes = size_t(options.max_send_message_bytes);
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<server::ObjectDatabaseService> service,
                          server::ObjectDatabaseService::create(service_options, store.get()));

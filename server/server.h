@@ -60,6 +60,9 @@ struct ServerOptions {
   // A session whose stream closed (or broke) and that gets no EndSession for this long is ended
   // by the server: its map is stored and its segments inserted. 0 = never.
   std::chrono::milliseconds auto_end_after{10 * 60 * 1000};
+  // An open session's map is saved this often, so that a crash loses only the frames after the
+  // last save (the next start ends the session from it). 0 = never.
+  std::chrono::milliseconds save_map_every{60 * 1000};
 
   // Checks every field; the message names the field and the bad value.
   Status validate() const;

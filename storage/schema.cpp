@@ -102,11 +102,42 @@ CREATE TABLE merge_records (
 CREATE INDEX merge_records_by_target ON merge_records(target);
 )sql";
 
+// Version 2: saved live maps of open sessions (a crash loses only the frames after the last
+// save), and the frame count a scene map was made from.
+constexpr const char* kSchemaV2 = R"sql(
+ALTER TABLE scene_maps ADD COLUMN frames INTEGER NOT NULL DEFAULT 0;
+CREATE TABLE saved_maps (
+  session_id INTEGER PRIMARY KEY REFERENCES sessions(id),
+  voxel_size REAL NOT NULL,
+  voxels_per_side INTEGER NOT NULL,
+  blocks INTEGER NOT NULL,
+  frames INTEGER NOT NULL DEFAULT 0,
+  updated_at TEXT NOT NULL
+);
+CREATE TABLE saved_blocks (
+  session_id INTEGER NOT NULL REFERENCES saved_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  tsdf BLOB NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
+CREATE TABLE saved_label_blocks (
+  session_id INTEGER NOT NULL REFERENCES saved_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  labels BLOB NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
+)sql";
+
 }  // namespace
 
 const std::vector<Migration>& schemaMigrations() {
   static const std::vector<Migration> migrations = {
       {1, "sessions, scene maps, raw segments, models, observations, merge records", kSchemaV1},
+      {2, "saved live maps of open sessions", kSchemaV2},
   };
   return migrations;
 }

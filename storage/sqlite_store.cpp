@@ -33,6 +33,8 @@ struct EncodedModel {
 namespace {
 
 constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
+constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks", "scene_label_blocks"};
+constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks", "saved_label_blocks"};
 
 // Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
 Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
@@ -686,77 +688,80 @@ StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecords() const {
   return records;
 }
 
-Status SqliteStore::putScene(const std::string& session,
-                             std::shared_ptr<const tsdf::TsdfLayer> scene,
-                             std::shared_ptr<const gsm::LabelBlocks> labels) {
-  if (scene == nullptr) {
-    return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
-  }
+Status SqliteStore::writeMap(const MapTables& tables, const std::string& session,
+                             const tsdf::TsdfLayer& scene, const gsm::LabelBlocks* labels,
+                             int64_t frames) {
   struct EncodedBlock {
     tsdf::BlockIndex index;
     std::string blob;
   };
   std::vector<EncodedBlock> blocks;
-  blocks.reserve(scene->numBlocks());
-  for (const auto& [index, block] : scene->blocks()) {
+  blocks.reserve(scene.numBlocks());
+  for (const auto& [index, block] : scene.blocks()) {
     blocks.push_back({index, encodeTsdfBlock(*block, options_.blobs)});
   }
   std::vector<EncodedBlock> label_blocks;
   if (labels != nullptr) {
-    const size_t voxels = size_t(scene->voxelsPerSide()) * scene->voxelsPerSide() *
-                          scene->voxelsPerSide();
+    const size_t voxels = size_t(scene.voxelsPerSide()) * scene.voxelsPerSide() *
+                          scene.voxelsPerSide();
     for (const auto& [index, block] : *labels) {
       if (block.size() != voxels) {
         return absl::InvalidArgumentError(absl::StrFormat(
-            "scene of session %s: label block (%d, %d, %d) has %d labels, the grid's blocks %d",
-            session, index.x(), index.y(), index.z(), block.size(), voxels));
+            "%s of session %s: label block (%d, %d, %d) has %d labels, the grid's blocks %d",
+            tables.what, session, index.x(), index.y(), index.z(), block.size(), voxels));
       }
       label_blocks.push_back({index, encodeLabelBlock(block, options_.blobs)});
     }
   }
   std::lock_guard lock(write_mutex_);
   OBJDB_RETURN_IF_ERROR(requireWriter());
-  auto body = [&]() -> Status {
-    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
-                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
-    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(session));
+  OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
+  OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(session));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement map,
+      Statement::prepare(*writer_,
+                         absl::StrFormat("INSERT INTO %s(session_id, voxel_size, voxels_per_side, "
+                                         "blocks, frames, updated_at) VALUES (?, ?, ?, ?, ?, %s) "
+                                         "ON CONFLICT(session_id) DO UPDATE "
+                                         "SET voxel_size = excluded.voxel_size, "
+                                         "voxels_per_side = excluded.voxels_per_side, "
+                                         "blocks = excluded.blocks, frames = excluded.frames, "
+                                         "updated_at = excluded.updated_at",
+                                         tables.maps, kNow)));
+  map.bind(1, sid).bind(2, double(scene.voxelSize())).bind(3, int64_t(scene.voxelsPerSide()));
+  OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).bind(5, frames).run());
+  // A block table's rows of this session replaced by `rows` (TSDF or label blocks).
+  auto replaceBlocks = [&](const char* table, const char* column,
+                           const std::vector<EncodedBlock>& rows) -> Status {
     OBJDB_ASSIGN_OR_RETURN(
-        Statement map,
-        Statement::prepare(*writer_,
-                           absl::StrFormat("INSERT INTO scene_maps(session_id, voxel_size, "
-                                           "voxels_per_side, blocks, updated_at) VALUES "
-                                           "(?, ?, ?, ?, %s) ON CONFLICT(session_id) DO UPDATE "
-                                           "SET voxel_size = excluded.voxel_size, "
-                                           "voxels_per_side = excluded.voxels_per_side, "
-                                           "blocks = excluded.blocks, "
-                                           "updated_at = excluded.updated_at",
-                                           kNow)));
-    map.bind(1, sid).bind(2, double(scene->voxelSize())).bind(3, int64_t(scene->voxelsPerSide()));
-    OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).run());
-    // A block table's rows of this session replaced by `rows` (TSDF or label blocks).
-    auto replaceBlocks = [&](const char* table, const char* column,
-                             const std::vector<EncodedBlock>& rows) -> Status {
-      OBJDB_ASSIGN_OR_RETURN(
-          Statement del,
-          Statement::prepare(*writer_, absl::StrFormat("DELETE FROM %s WHERE session_id = ?", table)));
-      OBJDB_RETURN_IF_ERROR(del.bind(1, sid).run());
-      OBJDB_ASSIGN_OR_RETURN(
-          Statement insert,
-          Statement::prepare(*writer_, absl::StrFormat("INSERT INTO %s(session_id, bx, by, bz, %s) "
-                                                       "VALUES (?, ?, ?, ?, ?)",
-                                                       table, column)));
-      for (const auto& b : rows) {
-        OBJDB_RETURN_IF_ERROR(insert.reset());
-        insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
-        OBJDB_RETURN_IF_ERROR(insert.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
-      }
-      return absl::OkStatus();
-    };
-    OBJDB_RETURN_IF_ERROR(replaceBlocks("scene_blocks", "tsdf", blocks));
-    OBJDB_RETURN_IF_ERROR(replaceBlocks("scene_label_blocks", "labels", label_blocks));
-    return txn.commit();
+        Statement del,
+        Statement::prepare(*writer_, absl::StrFormat("DELETE FROM %s WHERE session_id = ?", table)));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, sid).run());
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement insert,
+        Statement::prepare(*writer_, absl::StrFormat("INSERT INTO %s(session_id, bx, by, bz, %s) "
+                                                     "VALUES (?, ?, ?, ?, ?)",
+                                                     table, column)));
+    for (const auto& b : rows) {
+      OBJDB_RETURN_IF_ERROR(insert.reset());
+      insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
+      OBJDB_RETURN_IF_ERROR(insert.bind(4, int64_t(b.index.z())).bindBlob(5, b.blob).run());
+    }
+    return absl::OkStatus();
   };
-  OBJDB_RETURN_IF_ERROR(annotate(body(), absl::StrFormat("storing the scene of session %s", session)));
+  OBJDB_RETURN_IF_ERROR(replaceBlocks(tables.blocks, "tsdf", blocks));
+  OBJDB_RETURN_IF_ERROR(replaceBlocks(tables.label_blocks, "labels", label_blocks));
+  return txn.commit();
+}
+
+Status SqliteStore::putScene(const std::string& session,
+                             std::shared_ptr<const tsdf::TsdfLayer> scene,
+                             std::shared_ptr<const gsm::LabelBlocks> labels) {
+  if (scene == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
+  }
+  OBJDB_RETURN_IF_ERROR(annotate(writeMap(kSceneTables, session, *scene, labels.get(), 0),
+                                 absl::StrFormat("storing the scene of session %s", session)));
   std::lock_guard cache_lock(scene_mutex_);
   const size_t max = size_t(options_.max_cached_scenes);
   cachePut(&scene_cache_, session, std::move(scene), max);
@@ -764,19 +769,32 @@ Status SqliteStore::putScene(const std::string& session,
   return absl::OkStatus();
 }
 
-StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
-    const std::string& session) const {
-  {
-    std::lock_guard lock(scene_mutex_);
-    if (auto cached = cacheGet(&label_cache_, session)) return *cached;
-  }
+Status SqliteStore::putSavedMap(const std::string& session, int64_t frames,
+                                const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels) {
+  return annotate(writeMap(kSavedTables, session, map, &labels, frames),
+                  absl::StrFormat("saving the live map of session %s", session));
+}
+
+StatusOr<SavedMap> SqliteStore::savedMap(const std::string& session) const {
+  SavedMap saved;
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(saved.map, readMapTsdf(*lease, kSavedTables, session, &saved.frames));
+  OBJDB_ASSIGN_OR_RETURN(saved.labels, readMapLabels(*lease, kSavedTables, session));
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return saved;
+}
+
+StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::readMapLabels(
+    const Connection& connection, const MapTables& tables, const std::string& session) const {
   OBJDB_ASSIGN_OR_RETURN(
       Statement b,
-      Statement::prepare(*lease,
-                         "SELECT l.rowid, l.bx, l.by, l.bz, l.labels, m.voxels_per_side "
-                         "FROM scene_label_blocks l JOIN scene_maps m ON m.session_id = l.session_id "
-                         "JOIN sessions s ON s.id = l.session_id WHERE s.name = ?"));
+      Statement::prepare(connection,
+                         absl::StrFormat("SELECT l.rowid, l.bx, l.by, l.bz, l.labels, "
+                                         "m.voxels_per_side FROM %s l JOIN %s m ON m.session_id "
+                                         "= l.session_id JOIN sessions s ON s.id = l.session_id "
+                                         "WHERE s.name = ?",
+                                         tables.label_blocks, tables.maps)));
   b.bind(1, session);
   auto labels = std::make_shared<gsm::LabelBlocks>();
   while (true) {
@@ -791,14 +809,68 @@ StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
     }
     if (!decoded.ok()) {
       return annotate(decoded.status(),
-                      absl::StrFormat("labels of session %s, block (%d, %d, %d) "
-                                      "(scene_label_blocks row %d)",
-                                      session, index.x(), index.y(), index.z(), b.columnInt(0)));
+                      absl::StrFormat("%s labels of session %s, block (%d, %d, %d) (%s row %d)",
+                                      tables.what, session, index.x(), index.y(), index.z(),
+                                      tables.label_blocks, b.columnInt(0)));
     }
     labels->emplace(index, std::move(*decoded));
   }
   std::shared_ptr<const gsm::LabelBlocks> out;
   if (!labels->empty()) out = std::move(labels);
+  return out;
+}
+
+StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::readMapTsdf(
+    const Connection& connection, const MapTables& tables, const std::string& session,
+    int64_t* frames) const {
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement m,
+      Statement::prepare(connection,
+                         absl::StrFormat("SELECT m.session_id, m.voxel_size, m.voxels_per_side, "
+                                         "m.frames FROM %s m JOIN sessions s ON s.id = "
+                                         "m.session_id WHERE s.name = ?",
+                                         tables.maps)));
+  m.bind(1, session);
+  OBJDB_ASSIGN_OR_RETURN(const bool found, m.step());
+  if (!found) return std::shared_ptr<const tsdf::TsdfLayer>();
+  const int64_t sid = m.columnInt(0);
+  const int vps = int(m.columnInt(2));
+  if (frames != nullptr) *frames = m.columnInt(3);
+  auto layer = tsdf::TsdfLayer::create(float(m.columnDouble(1)), vps);
+  if (!layer.ok()) {
+    return absl::DataLossError(absl::StrFormat("%s of session %s: %s", tables.what, session,
+                                               layer.status().message()));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement b,
+      Statement::prepare(connection, absl::StrFormat("SELECT rowid, bx, by, bz, tsdf FROM %s "
+                                                     "WHERE session_id = ?",
+                                                     tables.blocks)));
+  b.bind(1, sid);
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, b.step());
+    if (!row) break;
+    const tsdf::BlockIndex index(int(b.columnInt(1)), int(b.columnInt(2)), int(b.columnInt(3)));
+    tsdf::TsdfBlock& block = layer->allocateBlock(index);
+    const Status decoded = decodeTsdfBlock(b.columnBlob(4), vps, &block);
+    if (!decoded.ok()) {
+      return annotate(decoded, absl::StrFormat("%s of session %s, block (%d, %d, %d) (%s row %d)",
+                                               tables.what, session, index.x(), index.y(), index.z(),
+                                               tables.blocks, b.columnInt(0)));
+    }
+  }
+  return std::make_shared<const tsdf::TsdfLayer>(std::move(*layer));
+}
+
+StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
+    const std::string& session) const {
+  {
+    std::lock_guard lock(scene_mutex_);
+    if (auto cached = cacheGet(&label_cache_, session)) return *cached;
+  }
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<const gsm::LabelBlocks> out,
+                         readMapLabels(*lease, kSceneTables, session));
   std::lock_guard lock(scene_mutex_);
   cachePut(&label_cache_, session, out, size_t(options_.max_cached_scenes));
   return out;
@@ -812,44 +884,13 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
   }
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement m,
-      Statement::prepare(*lease,
-                         "SELECT m.session_id, m.voxel_size, m.voxels_per_side FROM scene_maps m "
-                         "JOIN sessions s ON s.id = m.session_id WHERE s.name = ?"));
-  m.bind(1, session);
-  OBJDB_ASSIGN_OR_RETURN(const bool found, m.step());
-  if (!found) return std::shared_ptr<const tsdf::TsdfLayer>();
-  const int64_t sid = m.columnInt(0);
-  const int vps = int(m.columnInt(2));
-  auto layer = tsdf::TsdfLayer::create(float(m.columnDouble(1)), vps);
-  if (!layer.ok()) {
-    return absl::DataLossError(absl::StrFormat("scene of session %s: %s", session,
-                                               layer.status().message()));
-  }
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement b, Statement::prepare(*lease, "SELECT rowid, bx, by, bz, tsdf FROM scene_blocks "
-                                              "WHERE session_id = ?"));
-  b.bind(1, sid);
-  while (true) {
-    OBJDB_ASSIGN_OR_RETURN(const bool row, b.step());
-    if (!row) break;
-    const tsdf::BlockIndex index(int(b.columnInt(1)), int(b.columnInt(2)), int(b.columnInt(3)));
-    tsdf::TsdfBlock& block = layer->allocateBlock(index);
-    const Status decoded = decodeTsdfBlock(b.columnBlob(4), vps, &block);
-    if (!decoded.ok()) {
-      return annotate(decoded, absl::StrFormat("scene of session %s, block (%d, %d, %d) "
-                                               "(scene_blocks row %d)",
-                                               session, index.x(), index.y(), index.z(),
-                                               b.columnInt(0)));
-    }
-  }
+  OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<const tsdf::TsdfLayer> shared,
+                         readMapTsdf(*lease, kSceneTables, session, nullptr));
   OBJDB_RETURN_IF_ERROR(snapshot.commit());
-  auto shared = std::make_shared<const tsdf::TsdfLayer>(std::move(*layer));
+  if (shared == nullptr) return shared;  // no scene stored (not cached: it may come)
   std::lock_guard lock(scene_mutex_);
-  cachePut(&scene_cache_, session, std::shared_ptr<const tsdf::TsdfLayer>(shared),
-           size_t(options_.max_cached_scenes));
-  return std::shared_ptr<const tsdf::TsdfLayer>(shared);
+  cachePut(&scene_cache_, session, shared, size_t(options_.max_cached_scenes));
+  return shared;
 }
 
 StatusOr<SessionInfo> SqliteStore::beginSession(const SessionInfo& info) {
@@ -881,11 +922,48 @@ Status SqliteStore::finishSession(const std::string& name, SessionState state, i
                                                    "ended_at = %s WHERE name = ?",
                                                    kNow)));
   s.bind(1, std::string_view(sessionStateName(state))).bind(2, frames).bind(3, name);
+  OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
   OBJDB_RETURN_IF_ERROR(s.run());
   if (sqlite3_changes(writer_->get()) == 0) {
     return absl::NotFoundError(absl::StrFormat("no session %s", name));
   }
+  // Its scene map is stored: the saved live map has served its purpose.
+  if (state == SessionState::kEnded) OBJDB_RETURN_IF_ERROR(deleteSavedMap(name));
+  return txn.commit();
+}
+
+Status SqliteStore::deleteSavedMap(const std::string& session) {
+  for (const char* table : {kSavedTables.label_blocks, kSavedTables.blocks, kSavedTables.maps}) {
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement del,
+        Statement::prepare(*writer_, absl::StrFormat("DELETE FROM %s WHERE session_id = "
+                                                     "(SELECT id FROM sessions WHERE name = ?)",
+                                                     table)));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, session).run());
+  }
   return absl::OkStatus();
+}
+
+Status SqliteStore::dropSavedMap(const std::string& session) {
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_RETURN_IF_ERROR(deleteSavedMap(session));
+    return txn.commit();
+  };
+  return annotate(body(), absl::StrFormat("deleting the saved map of session %s", session));
+}
+
+StatusOr<int64_t> SqliteStore::savedMapFrames(const std::string& session) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s, Statement::prepare(*lease, "SELECT m.frames FROM saved_maps m JOIN sessions s "
+                                              "ON s.id = m.session_id WHERE s.name = ?"));
+  s.bind(1, session);
+  OBJDB_ASSIGN_OR_RETURN(const bool found, s.step());
+  return found ? s.columnInt(0) : int64_t{-1};
 }
 
 std::string intrinsicsJson(const Intrinsics& intrinsics) {
@@ -962,6 +1040,7 @@ StatusOr<CheckReport> SqliteStore::check() const {
       {"raw_segments", "voxels", [](auto b) { return decodeVoxelList(b).status(); }},
       {"merge_records", "transform", [](auto b) { return decodeTransform(b).status(); }},
       {"scene_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
+      {"saved_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
   };
   for (const auto& c : columns) {
     OBJDB_ASSIGN_OR_RETURN(
@@ -979,25 +1058,29 @@ StatusOr<CheckReport> SqliteStore::check() const {
       }
     }
   }
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement blocks,
-      Statement::prepare(*lease, "SELECT b.rowid, m.voxels_per_side, b.tsdf FROM scene_blocks b "
-                                 "JOIN scene_maps m ON m.session_id = b.session_id ORDER BY b.rowid"));
-  while (true) {
-    OBJDB_ASSIGN_OR_RETURN(const bool row, blocks.step());
-    if (!row) break;
-    ++report.blobs_checked;
-    const int vps = int(blocks.columnInt(1));
-    if (!(vps >= 2 && vps <= 64)) {
-      report.damaged.push_back({"scene_blocks", blocks.columnInt(0), "tsdf",
-                                absl::StrFormat("scene map has %d voxels per side", vps)});
-      continue;
-    }
-    tsdf::TsdfBlock block(vps);
-    const Status status = decodeTsdfBlock(blocks.columnBlob(2), vps, &block);
-    if (!status.ok()) {
-      report.damaged.push_back(
-          {"scene_blocks", blocks.columnInt(0), "tsdf", std::string(status.message())});
+  for (const MapTables* tables : {&kSceneTables, &kSavedTables}) {
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement blocks,
+        Statement::prepare(*lease, absl::StrFormat("SELECT b.rowid, m.voxels_per_side, b.tsdf "
+                                                   "FROM %s b JOIN %s m ON m.session_id = "
+                                                   "b.session_id ORDER BY b.rowid",
+                                                   tables->blocks, tables->maps)));
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool row, blocks.step());
+      if (!row) break;
+      ++report.blobs_checked;
+      const int vps = int(blocks.columnInt(1));
+      if (!(vps >= 2 && vps <= 64)) {
+        report.damaged.push_back({tables->blocks, blocks.columnInt(0), "tsdf",
+                                  absl::StrFormat("map has %d voxels per side", vps)});
+        continue;
+      }
+      tsdf::TsdfBlock block(vps);
+      const Status status = decodeTsdfBlock(blocks.columnBlob(2), vps, &block);
+      if (!status.ok()) {
+        report.damaged.push_back(
+            {tables->blocks, blocks.columnInt(0), "tsdf", std::string(status.message())});
+      }
     }
   }
   OBJDB_RETURN_IF_ERROR(snapshot.commit());
@@ -1016,6 +1099,8 @@ StatusOr<StoreStats> SqliteStore::stats() const {
       {"sessions", "0"},
       {"scene_blocks", "length(tsdf)"},
       {"scene_label_blocks", "length(labels)"},
+      {"saved_blocks", "length(tsdf)"},
+      {"saved_label_blocks", "length(labels)"},
       {"raw_segments", "length(pose) + length(grid) + length(voxels)"},
       {"models",
        "COALESCE(length(grid), 0) + COALESCE(length(surface_voxels), 0) + "

@@ -37,6 +37,22 @@ struct SqliteStoreOptions {
   Status validate() const;
 };
 
+// An open session's map as the server last saved it: its TSDF and main labels after `frames`
+// frames. `map` is null when none is saved.
+struct SavedMap {
+  int64_t frames = 0;
+  std::shared_ptr<const tsdf::TsdfLayer> map;
+  std::shared_ptr<const gsm::LabelBlocks> labels;
+};
+
+// The tables of one kind of stored map: a session's scene map, or its saved live map.
+struct MapTables {
+  const char* what;  // in messages: "scene" or "saved map"
+  const char* maps;
+  const char* blocks;
+  const char* label_blocks;
+};
+
 enum class SessionState { kOpen, kEnded, kInterrupted };
 const char* sessionStateName(SessionState state);
 
@@ -143,6 +159,16 @@ class SqliteStore : public database::ModelStore {
   StatusOr<std::shared_ptr<const gsm::LabelBlocks>> sceneLabels(
       const std::string& session) const override;
 
+  // The live map of an open session, saved now and then so that a crash loses only what came
+  // after (replacing the earlier save). It is not the session's scene map: scene() does not see
+  // it, and finishSession(kEnded) deletes it.
+  Status putSavedMap(const std::string& session, int64_t frames, const tsdf::TsdfLayer& map,
+                     const gsm::LabelBlocks& labels);
+  StatusOr<SavedMap> savedMap(const std::string& session) const;
+  // The frame count of the session's saved map without reading it; −1 when none is saved.
+  StatusOr<int64_t> savedMapFrames(const std::string& session) const;
+  Status dropSavedMap(const std::string& session);
+
   // Model rows without blobs (see ModelQuery), one snapshot.
   StatusOr<std::vector<ModelSummary>> modelSummaries(const ModelQuery& query) const;
   // The id of a stored raw segment (NOT_FOUND when none has that key).
@@ -167,6 +193,19 @@ class SqliteStore : public database::ModelStore {
   Status requireWriter() const;
   StatusOr<int64_t> sessionIdForWrite(const std::string& name);
   Status writeObservations(int64_t model_id, const EncodedModel& model, bool replace);
+  // A map (TSDF blocks, optional main labels) into `tables`, replacing the session's earlier one.
+  Status writeMap(const MapTables& tables, const std::string& session,
+                  const tsdf::TsdfLayer& scene, const gsm::LabelBlocks* labels, int64_t frames);
+  // A map from `tables` (null when the session has none); `frames` gets its frame count.
+  StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> readMapTsdf(const Connection& connection,
+                                                               const MapTables& tables,
+                                                               const std::string& session,
+                                                               int64_t* frames) const;
+  // Deletes the session's saved map (writer, inside the caller's transaction).
+  Status deleteSavedMap(const std::string& session);
+  StatusOr<std::shared_ptr<const gsm::LabelBlocks>> readMapLabels(const Connection& connection,
+                                                                  const MapTables& tables,
+                                                                  const std::string& session) const;
 
   std::string path_;
   SqliteStoreOptions options_;

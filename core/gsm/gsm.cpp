@@ -355,6 +355,81 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   return result;
 }
 
+namespace {
+
+// The voxels of block `b` whose label (by `labelOf(i)`, i = the voxel's index in the block)
+// is `label`, appended to `voxels`.
+template <typename LabelOf>
+void appendLabelVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Label label,
+                       LabelOf&& labelOf, std::vector<tsdf::VoxelIndex>* voxels) {
+  for (size_t i = 0; i < count; ++i) {
+    if (labelOf(i) != label) continue;
+    const int x = int(i % size_t(vps)), y = int((i / size_t(vps)) % size_t(vps)),
+              z = int(i / size_t(vps * vps));
+    voxels->push_back(b * vps + Eigen::Vector3i(x, y, z));
+  }
+}
+
+}  // namespace
+
+RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
+                             std::vector<tsdf::VoxelIndex> voxels, int margin,
+                             int64_t last_update_frame, int64_t frame) {
+  std::sort(voxels.begin(), voxels.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+  });
+  RawSegment segment{label, Transform::Identity(),
+                     tsdf::TsdfLayer::create(layer.voxelSize(), layer.voxelsPerSide()).value(),
+                     {}, last_update_frame, frame};
+  if (voxels.empty()) return segment;
+  Eigen::Vector3i lo = voxels.front();
+  for (const auto& v : voxels) lo = lo.cwiseMin(v);
+  const tsdf::VoxelIndex origin = lo - Eigen::Vector3i::Constant(margin);
+  segment.T_world_segment.translation() = origin.cast<double>() * double(layer.voxelSize());
+  for (const auto& v : voxels) {
+    segment.label_voxels.push_back(v - origin);
+    for (int dz = -margin; dz <= margin; ++dz) {
+      for (int dy = -margin; dy <= margin; ++dy) {
+        for (int dx = -margin; dx <= margin; ++dx) {
+          const tsdf::VoxelIndex src = v + Eigen::Vector3i(dx, dy, dz);
+          const tsdf::TsdfVoxel* voxel = layer.voxel(src);
+          if (voxel == nullptr || !(voxel->weight > 0.0f)) continue;
+          const tsdf::VoxelIndex dst = src - origin;
+          segment.grid.allocateBlock(segment.grid.blockOfVoxel(dst));
+          *segment.grid.voxel(dst) = *voxel;
+        }
+      }
+    }
+  }
+  return segment;
+}
+
+std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
+                                        int min_label_voxels, int margin, int64_t frame) {
+  const int vps = layer.voxelsPerSide();
+  absl::flat_hash_map<Label, std::vector<tsdf::BlockIndex>> blocks_of;
+  for (const auto& [index, block] : labels) {
+    absl::flat_hash_set<Label> seen;
+    for (const Label l : block) {
+      if (l != 0 && seen.insert(l).second) blocks_of[l].push_back(index);
+    }
+  }
+  std::vector<Label> order;
+  for (const auto& [label, unused] : blocks_of) order.push_back(label);
+  std::sort(order.begin(), order.end());
+  std::vector<RawSegment> segments;
+  for (const Label label : order) {
+    std::vector<tsdf::VoxelIndex> voxels;
+    for (const tsdf::BlockIndex& b : blocks_of[label]) {
+      const std::vector<Label>& block = labels.at(b);
+      appendLabelVoxels(b, block.size(), vps, label, [&](size_t i) { return block[i]; }, &voxels);
+    }
+    if (voxels.size() < size_t(std::max(min_label_voxels, 1))) continue;
+    segments.push_back(extractRawSegment(layer, label, std::move(voxels), margin, frame, frame));
+  }
+  return segments;
+}
+
 std::vector<RawSegment> Gsm::extractIdle(bool flush) {
   std::vector<Label> ready;
   for (const auto& [label, info] : info_) {
@@ -374,43 +449,14 @@ std::vector<RawSegment> Gsm::extractIdle(bool flush) {
     for (const tsdf::BlockIndex& b : info.blocks) {
       const auto it = label_blocks_.find(b);
       if (it == label_blocks_.end()) continue;
-      for (size_t i = 0; i < it->second.size(); ++i) {
-        if (it->second[i].empty() || mainOf(it->second[i]) != label) continue;
-        const int x = int(i % size_t(vps)), y = int((i / size_t(vps)) % size_t(vps)),
-                  z = int(i / size_t(vps * vps));
-        voxels.push_back(b * vps + Eigen::Vector3i(x, y, z));
-      }
+      const std::vector<LabelVoxel>& block = it->second;
+      appendLabelVoxels(b, block.size(), vps, label,
+                        [&](size_t i) { return block[i].empty() ? Label{0} : mainOf(block[i]); },
+                        &voxels);
     }
     if (voxels.size() < size_t(params_.min_label_voxels)) continue;
-    std::sort(voxels.begin(), voxels.end(), [](const auto& a, const auto& b) {
-      return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
-    });
-    Eigen::Vector3i lo = voxels.front(), hi = voxels.front();
-    for (const auto& v : voxels) {
-      lo = lo.cwiseMin(v);
-      hi = hi.cwiseMax(v);
-    }
-    const tsdf::VoxelIndex origin = lo - Eigen::Vector3i::Constant(margin);
-    RawSegment segment{label, Transform::Identity(),
-                       tsdf::TsdfLayer::create(layer_.voxelSize(), vps).value(), {},
-                       info.last_update_frame, frame_};
-    segment.T_world_segment.translation() = origin.cast<double>() * double(layer_.voxelSize());
-    for (const auto& v : voxels) {
-      segment.label_voxels.push_back(v - origin);
-      for (int dz = -margin; dz <= margin; ++dz) {
-        for (int dy = -margin; dy <= margin; ++dy) {
-          for (int dx = -margin; dx <= margin; ++dx) {
-            const tsdf::VoxelIndex src = v + Eigen::Vector3i(dx, dy, dz);
-            const tsdf::TsdfVoxel* voxel = layer_.voxel(src);
-            if (voxel == nullptr || !(voxel->weight > 0.0f)) continue;
-            const tsdf::VoxelIndex dst = src - origin;
-            segment.grid.allocateBlock(segment.grid.blockOfVoxel(dst));
-            *segment.grid.voxel(dst) = *voxel;
-          }
-        }
-      }
-    }
-    segments.push_back(std::move(segment));
+    segments.push_back(extractRawSegment(layer_, label, std::move(voxels), margin,
+                                         info.last_update_frame, frame_));
   }
   return segments;
 }

@@ -54,6 +54,18 @@ struct LabelInfo {
 // voxel order: the labels of a scene map as the store keeps them.
 using LabelBlocks = absl::flat_hash_map<tsdf::BlockIndex, std::vector<Label>, tsdf::BlockIndexHash>;
 
+// The raw segment of `label` made of `voxels` (map voxel indices): their TSDF plus `margin`
+// voxels around them, in the segment frame (see RawSegment).
+RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
+                             std::vector<tsdf::VoxelIndex> voxels, int margin,
+                             int64_t last_update_frame, int64_t frame);
+
+// Every label of a stored map (its TSDF and main labels) with at least `min_label_voxels`
+// voxels as a raw segment, in label order, as the GSM would extract them at the end of its
+// session (used to end a session from its saved map, without its label histories).
+std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
+                                        int min_label_voxels, int margin, int64_t frame);
+
 class Gsm {
  public:
   static StatusOr<Gsm> create(const TsdfParams& tsdf_params, const GsmParams& gsm_params,

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/common/params.h"
+#include "core/common/params_io.h"
 #include "core/database/object_database.h"
 #include "core/gsm/gsm.h"
 #include "core/io/image_io.h"
@@ -85,11 +86,12 @@ std::vector<v1::ObjectSummary> listObjects(v1::ObjectDatabase::Stub& stub,
   return out;
 }
 
-// The offline pipeline on the same frames (as `objdb ingest` runs it): models in id order.
-std::vector<std::shared_ptr<const model::ObjectModel>> offlineModels(
-    const std::string& name, size_t frames, database::InMemoryModelStore* store) {
+// The offline pipeline (as `objdb ingest` runs it) on the first `frames` frames into `store`:
+// idle segments are inserted as they come, and with `flush` every segment at the end, as
+// EndSession does. Returns the map.
+gsm::Gsm runPipeline(const std::string& name, size_t frames, database::ModelStore* store,
+                     bool flush, const Params& params = Params()) {
   const Recording& r = twoBoxes();
-  const Params params;
   auto segmenter = segmentation::DepthSegmenter::create(params.segmentation, r.intrinsics);
   auto map = gsm::Gsm::create(params.tsdf, params.gsm, r.intrinsics, 2);
   auto db = database::ObjectDatabase::create(params, store);
@@ -104,7 +106,15 @@ std::vector<std::shared_ptr<const model::ObjectModel>> offlineModels(
     EXPECT_TRUE(map->integrate(*depth, seg->labels, r.poses[k], &r.color[k]).ok());
     insert(map->extractIdle());
   }
-  insert(map->extractIdle(true));
+  if (flush) insert(map->extractIdle(true));
+  return *std::move(map);
+}
+
+// The models the offline pipeline builds from the first `frames` frames, in id order.
+std::vector<std::shared_ptr<const model::ObjectModel>> offlineModels(
+    const std::string& name, size_t frames, database::InMemoryModelStore* store,
+    const Params& params = Params()) {
+  runPipeline(name, frames, store, /*flush=*/true, params);
   std::vector<std::shared_ptr<const model::ObjectModel>> models;
   const auto ids = store->modelIds();
   EXPECT_TRUE(ids.ok());
@@ -666,6 +676,101 @@ TEST(ObjectDatabaseService, AFailingDiskFailsEndSessionAndNothingIsLostOnceTheDi
   ASSERT_TRUE(report.ok()) << report.status();
   EXPECT_TRUE(report->ok());
   server->shutdown();
+}
+
+// An open session's map is saved while it streams (save_map_every), apart from its scene map,
+// and the save goes when the session ends.
+TEST(ObjectDatabaseService, AnOpenSessionsMapIsSavedAndTheSaveGoesWhenItEnds) {
+  ServerOptions options = loopbackOptions(scratchDbPath());
+  options.save_map_every = std::chrono::milliseconds(1);
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  constexpr size_t kFrames = 12;
+  // The stream's summary comes after the database queue ran dry: the saves are stored.
+  ASSERT_TRUE(ingest(*stub, session("monday", kFrames)).status.ok());
+  const auto saved = server->store().savedMap("monday");
+  ASSERT_TRUE(saved.ok()) << saved.status();
+  ASSERT_NE(saved->map, nullptr);
+  EXPECT_GE(saved->frames, 2);
+  EXPECT_LE(saved->frames, int64_t(kFrames));
+  EXPECT_GT(saved->map->numBlocks(), 10u);
+  ASSERT_NE(saved->labels, nullptr);
+  EXPECT_EQ(server->store().scene("monday").value(), nullptr);
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "monday", &ended).ok());
+  EXPECT_EQ(server->store().savedMapFrames("monday").value(), -1);
+  EXPECT_NE(server->store().scene("monday").value(), nullptr);
+}
+
+// What a crash leaves: a session stored as open with a map saved after F frames, and the
+// segments extracted before. The next start ends it from the saved map, while serving: the
+// database then holds what the offline pipeline builds from those F frames flushed. The session
+// is INTERRUPTED, and EndSession says what was recovered. One segment was inserted before the
+// save and is unchanged in it: it is not inserted again (the model ids would show it).
+TEST(ObjectDatabaseService, ASessionLeftOpenByACrashIsEndedFromItsSavedMapAtTheNextStart) {
+  constexpr size_t kSavedFrames = 24;
+  const std::string db_path = scratchDbPath();
+  {
+    auto store = storage::SqliteStore::open(db_path).value();
+    storage::SessionInfo info;
+    info.name = "monday";
+    info.intrinsics_json = storage::intrinsicsJson(twoBoxes().intrinsics);
+    info.params_json = paramsToJson(Params());
+    ASSERT_TRUE(store->beginSession(info).ok());
+    gsm::Gsm map = runPipeline("monday", kSavedFrames, store.get(), /*flush=*/false);
+    const gsm::LabelBlocks labels = map.mainLabelBlocks();
+    // What EndSession would insert, in label order: the first one goes in before the save.
+    const std::vector<gsm::RawSegment> segments = map.extractIdle(true);
+    ASSERT_GE(segments.size(), 2u);
+    auto db = database::ObjectDatabase::create(Params(), store.get()).value();
+    ASSERT_TRUE(db->insertSegment("monday", segments.front()).ok());
+    ASSERT_TRUE(store->putSavedMap("monday", map.frames(), map.tsdf(), labels).ok());
+  }
+  database::InMemoryModelStore offline_store;
+  const auto offline = offlineModels("monday", kSavedFrames, &offline_store);
+  ASSERT_FALSE(offline.empty());
+
+  auto server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  v1::EndSessionResponse ended;
+  grpc::Status end;
+  for (int attempt = 0; attempt < 500; ++attempt) {  // UNAVAILABLE while it is being ended
+    end = endSession(*stub, "monday", &ended);
+    if (end.error_code() != grpc::StatusCode::UNAVAILABLE) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << end.error_message();
+  EXPECT_NE(end.error_message().find("saved after 24 frames"), std::string::npos)
+      << end.error_message();
+
+  const auto objects = listObjects(*stub);
+  ASSERT_EQ(objects.size(), offline.size());
+  for (size_t i = 0; i < objects.size(); ++i) {
+    EXPECT_EQ(objects[i].id(), uint64_t(offline[i]->id)) << i;
+    EXPECT_EQ(objects[i].num_poses(), offline[i]->observations.size()) << i;
+    EXPECT_EQ(objects[i].planar(), offline[i]->planar) << i;
+  }
+  grpc::ClientContext context;
+  setDeadline(&context);
+  v1::ListSessionsResponse sessions;
+  ASSERT_TRUE(stub->ListSessions(&context, v1::ListSessionsRequest(), &sessions).ok());
+  ASSERT_EQ(sessions.sessions_size(), 1);
+  EXPECT_EQ(sessions.sessions(0).state(), v1::SESSION_STATE_INTERRUPTED);
+  EXPECT_EQ(sessions.sessions(0).counters().frames_integrated(), kSavedFrames);
+  EXPECT_EQ(server->store().savedMapFrames("monday").value(), -1);
+  EXPECT_NE(server->store().scene("monday").value(), nullptr);
+  EXPECT_TRUE(server->store().check().value().ok());
+
+  // A second start has nothing left to recover and says the same.
+  server->shutdown();
+  server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  stub = stubFor(*server);
+  EXPECT_EQ(listObjects(*stub).size(), offline.size());
+  end = endSession(*stub, "monday", &ended);
+  EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << end.error_message();
 }
 
 TEST(ObjectDatabaseService, ASessionLeftWithoutEndSessionIsEndedByTheServer) {

@@ -79,6 +79,14 @@ TEST(ObjdbServerBinary, MissingOrMalformedValuesExitTwo) {
   EXPECT_TRUE(contains(result.err, "--max-message-mib must be an integer in [1, 1024]"))
       << result.err;
 
+  result = runProcess({kServer, "--save-map-s", "-1"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "--save-map-s must be a number of seconds in [0, 86400]"))
+      << result.err;
+  result = runProcess({kServer, "--save-map-s=often"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "got \"often\"")) << result.err;
+
   result = runProcess({kServer, "--allow-remote=yes"});
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_TRUE(contains(result.err, "--allow-remote takes no value")) << result.err;

@@ -162,6 +162,7 @@ TEST(ServerOptions, DefaultsAreValidAndMatchTheDocumentation) {
   EXPECT_EQ(options.max_receive_message_bytes, 16 * 1024 * 1024);
   EXPECT_EQ(options.max_send_message_bytes, 16 * 1024 * 1024);
   EXPECT_EQ(options.drain_deadline, std::chrono::seconds(10));
+  EXPECT_EQ(options.save_map_every, std::chrono::seconds(60));
 }
 
 TEST(ServerOptions, ParsesLoopbackAddresses) {
@@ -253,6 +254,17 @@ TEST(ServerOptions, RejectsNegativeOrHugeDrainDeadline) {
   options.drain_deadline = kMaxDrainDeadline + std::chrono::milliseconds(1);
   EXPECT_EQ(options.validate().code(), absl::StatusCode::kInvalidArgument);
   options.drain_deadline = std::chrono::milliseconds(0);
+  EXPECT_TRUE(options.validate().ok());
+}
+
+TEST(ServerOptions, RejectsANegativeOrHugeMapSavingPeriod) {
+  ServerOptions options;
+  options.save_map_every = std::chrono::milliseconds(-1);
+  EXPECT_NE(options.validate().message().find("save_map_every is -1 ms"), absl::string_view::npos)
+      << options.validate();
+  options.save_map_every = std::chrono::hours(25);
+  EXPECT_EQ(options.validate().code(), absl::StatusCode::kInvalidArgument);
+  options.save_map_every = std::chrono::milliseconds(0);  // never
   EXPECT_TRUE(options.validate().ok());
 }
 

@@ -227,6 +227,74 @@ TEST(SqliteStore, ScenesRoundTripPerBlockAndSurviveReopen) {
   EXPECT_EQ(diffLayers(*store->scene("monday").value(), smaller), "");
 }
 
+// The server saves an open session's live map now and then (docs/server.md): it reads back
+// whole, replaces the earlier save, is not the session's scene map, survives an interrupted end
+// and is deleted when the session ends.
+TEST(SqliteStore, SavedLiveMapsRoundTripStayApartFromScenesAndGoWhenTheSessionEnds) {
+  TempDir dir;
+  const model::ObjectModel m = makeStoreModel(11, 1);
+  const tsdf::TsdfLayer& map = m.grid;
+  gsm::LabelBlocks labels;
+  for (const auto& [index, block] : map.blocks()) {
+    std::vector<gsm::Label> l(block->voxels().size());
+    for (size_t i = 0; i < l.size(); ++i) l[i] = gsm::Label(i % 5 == 0 ? 0 : 7 + i % 2);
+    labels.emplace(index, std::move(l));
+  }
+  auto store = openStore(dir / "db.sqlite");
+  SessionInfo info;
+  info.name = "monday";
+  ASSERT_TRUE(store->beginSession(info).ok());
+  EXPECT_EQ(store->savedMap("monday").value().map, nullptr);
+  EXPECT_EQ(store->savedMap("nobody").value().map, nullptr);
+
+  ASSERT_TRUE(store->putSavedMap("monday", 42, map, labels).ok());
+  store.reset();
+  store = openStore(dir / "db.sqlite");
+  {
+    const auto saved = store->savedMap("monday");
+    ASSERT_TRUE(saved.ok()) << saved.status();
+    EXPECT_EQ(saved->frames, 42);
+    ASSERT_NE(saved->map, nullptr);
+    EXPECT_EQ(diffLayers(*saved->map, map), "");
+    ASSERT_NE(saved->labels, nullptr);
+    EXPECT_TRUE(*saved->labels == labels);
+  }
+  EXPECT_EQ(store->scene("monday").value(), nullptr) << "a saved live map is not a scene map";
+  EXPECT_EQ(store->sceneLabels("monday").value(), nullptr);
+  const auto report = store->check();
+  ASSERT_TRUE(report.ok()) << report.status();
+  EXPECT_TRUE(report->ok());
+  EXPECT_GE(report->blobs_checked, 2 * map.numBlocks());
+
+  // A later save replaces every block of the earlier one.
+  tsdf::TsdfLayer smaller = tsdf::TsdfLayer::create(map.voxelSize(), map.voxelsPerSide()).value();
+  smaller.allocateBlock({5, 5, 5}).voxels()[0].weight = 2.0f;
+  gsm::LabelBlocks smaller_labels;
+  smaller_labels[{5, 5, 5}] = std::vector<gsm::Label>(smaller.block({5, 5, 5})->voxels().size(), 3);
+  ASSERT_TRUE(store->putSavedMap("monday", 50, smaller, smaller_labels).ok());
+  gsm::LabelBlocks wrong = smaller_labels;
+  wrong.begin()->second.pop_back();
+  EXPECT_EQ(store->putSavedMap("monday", 51, smaller, wrong).code(),
+            absl::StatusCode::kInvalidArgument);
+  {
+    const auto saved = store->savedMap("monday").value();
+    EXPECT_EQ(saved.frames, 50);
+    EXPECT_EQ(diffLayers(*saved.map, smaller), "");
+    EXPECT_TRUE(*saved.labels == smaller_labels);
+  }
+  // Interrupted: kept, the session may still be ended from it. Ended: gone, with its rows.
+  ASSERT_TRUE(store->finishSession("monday", SessionState::kInterrupted, 50).ok());
+  EXPECT_NE(store->savedMap("monday").value().map, nullptr);
+  ASSERT_TRUE(store->finishSession("monday", SessionState::kEnded, 50).ok());
+  EXPECT_EQ(store->savedMap("monday").value().map, nullptr);
+  const StoreStats stats = store->stats().value();
+  for (const auto& t : stats.tables) {
+    if (t.table == "saved_blocks" || t.table == "saved_label_blocks") {
+      EXPECT_EQ(t.rows, 0) << t.table;
+    }
+  }
+}
+
 // The decoded-scene cache keeps the most recently used maps only: a long-lived server with many
 // sessions does not keep every map in memory. Evicted maps are decoded again, unchanged.
 TEST(SqliteStore, TheSceneCacheIsBoundedAndEvictedScenesReadBackUnchanged) {
@@ -428,6 +496,30 @@ TEST(SqliteStore, OlderSchemasAreMigratedAndAFailedMigrationChangesNothing) {
   model::ObjectModel expected = makeStoreModel(1, 2);
   expected.id = 1;
   EXPECT_EQ(diffModels(*(*migrated)->model(1).value(), expected), "");
+}
+
+// This build's own migrations: a file of schema 1 (before saved live maps) opens as the current
+// schema with its models, and takes scenes and saved maps.
+TEST(SqliteStore, AFileOfTheFirstSchemaIsMigratedToTheCurrentOne) {
+  TempDir dir;
+  const auto path = (dir / "db.sqlite").string();
+  {
+    auto store = SqliteStore::open(path, {}, {schemaMigrations().front()});
+    ASSERT_TRUE(store.ok()) << store.status();
+    ASSERT_TRUE((*store)->addModel(makeStoreModel(1, 2)).ok());
+  }
+  auto store = SqliteStore::open(path);
+  ASSERT_TRUE(store.ok()) << store.status();
+  EXPECT_EQ((*store)->schema().version_before, 1);
+  EXPECT_EQ((*store)->schema().version_after, currentSchemaVersion());
+  model::ObjectModel expected = makeStoreModel(1, 2);
+  expected.id = 1;
+  EXPECT_EQ(diffModels(*(*store)->model(1).value(), expected), "");
+  const tsdf::TsdfLayer& map = expected.grid;
+  ASSERT_TRUE((*store)->putScene("s", std::make_shared<const tsdf::TsdfLayer>(map.clone())).ok());
+  ASSERT_TRUE((*store)->putSavedMap("s", 3, map, {}).ok());
+  EXPECT_EQ((*store)->savedMap("s").value().frames, 3);
+  EXPECT_TRUE((*store)->check().value().ok());
 }
 
 }  // namespace

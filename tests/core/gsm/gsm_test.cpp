@@ -325,6 +325,48 @@ TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {
   for (const auto& f : gsm.extractIdle(true)) EXPECT_NE(f.label, box);
 }
 
+// A session ended from its saved map (TSDF + main labels, no label histories) hands the database
+// the same raw segments as the GSM's own flush at the end of the session.
+TEST(Gsm, SegmentsExtractedFromTheSavedMapAreThoseOfTheFlush) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  Gsm gsm = makeGsm(k);
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  for (int f = 0; f < 6; ++f) {
+    renderer.render(world.instances(), world.camera(0.25 * f), &out);
+    ASSERT_TRUE(gsm.integrate(out.depth, labelsFrom(out.instances, f % 2 == 0),
+                              world.camera(0.25 * f)).ok());
+  }
+  const tsdf::TsdfLayer saved = gsm.tsdf().clone();
+  const LabelBlocks labels = gsm.mainLabelBlocks();
+  const GsmParams params;
+  const int margin = int(std::ceil(TsdfParams().truncation_voxels));
+  const std::vector<RawSegment> from_saved =
+      extractLabelled(saved, labels, params.min_label_voxels, margin, gsm.frames());
+  const std::vector<RawSegment> flushed = gsm.extractIdle(true);
+  ASSERT_GE(flushed.size(), 2u) << "the floor and the box";
+  ASSERT_EQ(from_saved.size(), flushed.size());
+  for (size_t i = 0; i < flushed.size(); ++i) {
+    SCOPED_TRACE(::testing::Message() << "label " << flushed[i].label);
+    EXPECT_EQ(from_saved[i].label, flushed[i].label);
+    EXPECT_TRUE(from_saved[i].T_world_segment.isApprox(flushed[i].T_world_segment, 1e-12));
+    EXPECT_EQ(from_saved[i].label_voxels, flushed[i].label_voxels);
+    EXPECT_EQ(from_saved[i].extraction_frame, gsm.frames());
+    ASSERT_EQ(from_saved[i].grid.numBlocks(), flushed[i].grid.numBlocks());
+    for (const auto& [index, block] : flushed[i].grid.blocks()) {
+      const tsdf::TsdfBlock* other = from_saved[i].grid.block(index);
+      ASSERT_NE(other, nullptr);
+      for (size_t v = 0; v < block->voxels().size(); ++v) {
+        ASSERT_EQ(other->voxels()[v].distance, block->voxels()[v].distance);
+        ASSERT_EQ(other->voxels()[v].weight, block->voxels()[v].weight);
+      }
+    }
+  }
+  // Labels below the minimum size are left out, as the flush leaves them.
+  EXPECT_TRUE(extractLabelled(saved, labels, 1 << 30, margin, gsm.frames()).empty());
+}
+
 TEST(Gsm, BadFramesAreRefusedAndLeaveTheMapUnchanged) {
   const Intrinsics k = Intrinsics::tango();
   Gsm gsm = makeGsm(k);
