@@ -50,9 +50,10 @@ options:
                           1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
   --auto-end-s N          end a session whose stream closed or broke after N seconds without
                           EndSession (its map is stored); 0 = never (default 600)
-  --save-map-s S          save each open session's map every S seconds, so that a crash loses
-                          only the frames after the last save (the next start ends the session
-                          from it); 0 = never (default 60)
+  --save-map-s S          save each open session's map every S seconds (and once more a few
+                          seconds after its stream went), so that a crash loses only the
+                          frames after the last save: the next start ends the session from it;
+                          0 = never (default 60)
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 
@@ -151,9 +152,11 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       std::string text;
       if (!take_value(&text)) return false;
       double seconds = 0.0;
-      if (!absl::SimpleAtod(text, &seconds) || !(seconds >= 0.0 && seconds <= 24 * 3600.0)) {
-        *error = absl::StrFormat("%s must be a number of seconds in [0, 86400], got \"%s\"", arg,
-                                 text);
+      if (!absl::SimpleAtod(text, &seconds) || !(seconds >= 0.0 && seconds <= 24 * 3600.0) ||
+          (seconds > 0.0 && seconds < 0.001)) {
+        *error = absl::StrFormat(
+            "%s must be 0 (never) or a number of seconds in [0.001, 86400], got \"%s\"", arg,
+            text);
         return false;
       }
       cli->options.save_map_every =

@@ -118,10 +118,26 @@ uint32_t pageSize(uint32_t requested) {
   return requested == 0 ? kDefaultPageSize : std::min(requested, kMaxPageSize);
 }
 
-// Whether a stored raw segment covers exactly the map voxels of `segment` (both in world voxel
-// indices): then re-inserting it would change nothing.
-bool sameVoxels(const database::RawSegmentRecord& stored, const gsm::RawSegment& segment) {
-  if (stored.voxels.size() != segment.label_voxels.size() || stored.grid == nullptr) return false;
+// Whether a stored raw segment is `segment`: the same map voxels (in world voxel indices) and the
+// same TSDF values around them. Then re-inserting it would change nothing; a label observed
+// again after its extraction has new TSDF values even where its voxels stayed.
+bool sameSegment(const database::RawSegmentRecord& stored, const gsm::RawSegment& segment) {
+  if (stored.voxels.size() != segment.label_voxels.size() || stored.grid == nullptr ||
+      stored.grid->voxelSize() != segment.grid.voxelSize() ||
+      stored.grid->voxelsPerSide() != segment.grid.voxelsPerSide() ||
+      stored.grid->numBlocks() != segment.grid.numBlocks() ||
+      !stored.T_world_segment.isApprox(segment.T_world_segment, 1e-9)) {
+    return false;
+  }
+  for (const auto& [index, block] : segment.grid.blocks()) {
+    const tsdf::TsdfBlock* other = stored.grid->block(index);
+    if (other == nullptr) return false;
+    for (size_t i = 0; i < block->voxels().size(); ++i) {
+      const tsdf::TsdfVoxel& a = block->voxels()[i];
+      const tsdf::TsdfVoxel& b = other->voxels()[i];
+      if (a.distance != b.distance || a.weight != b.weight) return false;
+    }
+  }
   const double voxel = double(segment.grid.voxelSize());
   const auto originOf = [voxel](const Transform& T) -> Eigen::Vector3i {
     return (T.translation() / voxel).array().round().cast<int>();
@@ -134,6 +150,9 @@ bool sameVoxels(const database::RawSegmentRecord& stored, const gsm::RawSegment&
   std::sort(y.begin(), y.end());
   return x == y;
 }
+
+// How long after its stream went a session still open gets its last frames saved.
+constexpr std::chrono::milliseconds kIdleSaveDelay{5000};
 
 int64_t fileBytes(const std::string& path) {
   int64_t total = 0;
@@ -190,9 +209,12 @@ struct LiveSession {
   // Database jobs to queue when the frame worker is done (EndSession of an interrupted stream).
   std::vector<std::function<void()>> after_stream;
 
-  // Saving the map (maybeSaveMap): the frame worker's clock, and a save waiting in the queue.
+  // Saving the map (maybeSaveMap): the frame worker's clock, a save waiting in the queue, and
+  // the frame count of the last save written.
   std::chrono::steady_clock::time_point map_saved_at{};
   std::atomic<bool> map_save_pending{false};
+  std::atomic<int64_t> map_saved_frames{0};
+  int64_t idle_save_tried = -1;  // frame count the janitor last queued a save for (mutex)
 
   v1::SessionCounters snapshot() {
     std::lock_guard lock(mutex);
@@ -390,20 +412,38 @@ StatusOr<std::unique_ptr<ObjectDatabaseService>> ObjectDatabaseService::create(
   }
   std::unique_ptr<ObjectDatabaseService> service(
       new ObjectDatabaseService(options, store, std::move(db)));
-  for (const auto& s : to_recover) {
-    service->recovering_.insert(s.name);
-    service->database_queue_->push([service = service.get(), s] {
-      const Status recovered = service->recoverSession(s);
+  service->to_recover_ = std::move(to_recover);
+  {
+    std::lock_guard lock(service->mutex_);
+    for (const auto& s : service->to_recover_) service->recovering_.insert(s.name);
+  }
+  return service;
+}
+
+void ObjectDatabaseService::startRecovery() {
+  std::vector<storage::SessionInfo> sessions;
+  sessions.swap(to_recover_);
+  for (const auto& s : sessions) {
+    database_queue_->push([this, s] {
+      const Status recovered = recoverSession(s);
       if (!recovered.ok()) {
         logger("server")->error("session {} could not be ended from its saved map (tried again "
                                 "at the next start): {}",
                                 s.name, std::string(recovered.message()));
       }
-      std::lock_guard lock(service->mutex_);
-      service->recovering_.erase(s.name);
+      std::lock_guard lock(mutex_);
+      recovering_.erase(s.name);
     });
   }
-  return service;
+}
+
+Status ObjectDatabaseService::checkNotRecovering(const std::string& name) {
+  std::lock_guard lock(mutex_);
+  if (recovering_.count(name) == 0) return absl::OkStatus();
+  return absl::UnavailableError(absl::StrFormat(
+      "session %s was not ended before the server stopped and is being ended from its saved map; "
+      "try again shortly",
+      name));
 }
 
 Status ObjectDatabaseService::recoverSession(const storage::SessionInfo& stored) {
@@ -424,7 +464,7 @@ Status ObjectDatabaseService::recoverSession(const storage::SessionInfo& stored)
   for (const gsm::RawSegment& segment : segments) {
     // A label extracted (and inserted) before the save and not changed since is already there.
     auto earlier = store_->rawSegment({stored.name, segment.label});
-    if (earlier.ok() && sameVoxels(**earlier, segment)) {
+    if (earlier.ok() && sameSegment(**earlier, segment)) {
       ++unchanged;
       continue;
     }
@@ -471,6 +511,19 @@ void ObjectDatabaseService::endIdleSessions() {
     const auto now = std::chrono::steady_clock::now();
     for (auto& [name, session] : sessions_) {
       std::lock_guard session_lock(session->mutex);
+      // A session whose stream is gone keeps its map in memory until it ends: what came after
+      // its last save is saved too, a few seconds after the stream went.
+      if (!session->streaming && !session->end_queued &&
+          session->state != v1::SESSION_STATE_ENDED && options_.save_map_every.count() > 0 &&
+          !session->map_save_pending &&
+          session->map_saved_frames < int64_t(session->counters.frames_integrated()) &&
+          session->idle_save_tried < int64_t(session->counters.frames_integrated()) &&
+          now - session->stream_gone >=
+              std::min<std::chrono::milliseconds>(options_.save_map_every, kIdleSaveDelay)) {
+        session->map_save_pending = true;
+        session->idle_save_tried = int64_t(session->counters.frames_integrated());  // once
+        database_queue_->push([this, session = session] { saveIdleMap(session); });
+      }
       if (session->streaming || session->end_queued ||
           session->state == v1::SESSION_STATE_ENDED ||
           now - session->stream_gone < options_.auto_end_after) {
@@ -843,28 +896,55 @@ void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& ses
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - now).count();
   // Behind the inserts queued before it (waiting when the queue is full, like them).
   database_queue_->pushWaiting([this, session, map, labels, frames, copy_ms] {
-    bool ended = false;
-    {
-      std::lock_guard lock(session->mutex);
-      ended = session->state == v1::SESSION_STATE_ENDED;
-    }
-    if (!ended) {
-      const auto start = std::chrono::steady_clock::now();
-      const Status saved = store_->putSavedMap(session->name, frames, *map, *labels);
-      if (saved.ok()) {
-        logger("server")->info(
-            "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms by the frame "
-            "worker, written in {:.0f} ms)",
-            session->name, frames, map->numBlocks(), copy_ms,
-            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-                .count());
-      } else {
-        logger("server")->warn("session {}: saving its map failed (a crash would lose more): {}",
-                               session->name, std::string(saved.message()));
-      }
-    }
-    session->map_save_pending = false;
+    writeSavedMap(session, *map, *labels, frames, copy_ms);
   });
+}
+
+void ObjectDatabaseService::saveIdleMap(const std::shared_ptr<LiveSession>& session) {
+  bool ended = false;
+  {
+    std::lock_guard lock(session->mutex);
+    ended = session->state == v1::SESSION_STATE_ENDED;
+  }
+  if (ended || !session->map) {
+    session->map_save_pending = false;
+    return;
+  }
+  // The stream is gone: the map is the database thread's now.
+  const auto start = std::chrono::steady_clock::now();
+  const tsdf::TsdfLayer map = session->map->tsdf().clone();
+  const gsm::LabelBlocks labels = session->map->mainLabelBlocks();
+  const double copy_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  writeSavedMap(session, map, labels, session->map->frames(), copy_ms);
+}
+
+void ObjectDatabaseService::writeSavedMap(const std::shared_ptr<LiveSession>& session,
+                                          const tsdf::TsdfLayer& map,
+                                          const gsm::LabelBlocks& labels, int64_t frames,
+                                          double copy_ms) {
+  bool ended = false;
+  {
+    std::lock_guard lock(session->mutex);
+    ended = session->state == v1::SESSION_STATE_ENDED;
+  }
+  if (!ended) {
+    const auto start = std::chrono::steady_clock::now();
+    const Status saved = store_->putSavedMap(session->name, frames, map, labels);
+    if (saved.ok()) {
+      session->map_saved_frames = frames;
+      logger("server")->info(
+          "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms, written in "
+          "{:.0f} ms)",
+          session->name, frames, map.numBlocks(), copy_ms,
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+              .count());
+    } else {
+      logger("server")->warn("session {}: saving its map failed (a crash would lose more): {}",
+                             session->name, std::string(saved.message()));
+    }
+  }
+  session->map_save_pending = false;
 }
 
 std::vector<RawSegmentJob> jobsOf(const LiveSession& session, std::vector<gsm::RawSegment> segments,
@@ -1054,22 +1134,25 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
   const std::string& name = request->session_name();
   std::shared_ptr<LiveSession> session = liveSession(name);
   if (!session) {
+    // Checked before the store is read: once off the list, its recovery is committed.
+    if (Status recovering = checkNotRecovering(name); !recovering.ok()) {
+      return finishUnary(context, recovering);
+    }
     auto stored = store_->sessions();
     if (!stored.ok()) return finishUnary(context, stored.status());
     for (const auto& s : *stored) {
       if (s.name != name) continue;
-      bool recovering = false;
-      {
-        std::lock_guard lock(mutex_);
-        recovering = recovering_.count(name) > 0;
-      }
-      if (recovering) {
-        return finishUnary(context, absl::UnavailableError(absl::StrFormat(
-                                        "session %s was not ended before the server stopped and "
-                                        "is being ended from its saved map; try again shortly",
-                                        name)));
-      }
       if (s.state != storage::SessionState::kEnded) {
+        auto saved_frames = store_->savedMapFrames(name);
+        if (!saved_frames.ok()) return finishUnary(context, saved_frames.status());
+        if (*saved_frames >= 0) {
+          return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
+                                          "session %s was not ended before the server stopped; "
+                                          "ending it from its map saved after %d frames failed "
+                                          "at this start (the server's log says why); the next "
+                                          "start tries again",
+                                          name, *saved_frames)));
+        }
         auto scene = store_->scene(name);
         if (!scene.ok()) return finishUnary(context, scene.status());
         if (*scene != nullptr) {
@@ -1331,6 +1414,7 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
   const bool completed = request->completed();
   startWorker([this, reactor, name, completed, context] {
     auto run = [&]() -> StatusOr<std::vector<TriangleMesh>> {
+      OBJDB_RETURN_IF_ERROR(checkNotRecovering(name));
       OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
       const auto it = std::find_if(stored.begin(), stored.end(),
                                    [&](const auto& s) { return s.name == name; });
@@ -1340,9 +1424,15 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
       OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const tsdf::TsdfLayer> scene,
                              store_->scene(name));
       if (!scene) {
+        if (it->state == storage::SessionState::kOpen || liveSession(name) != nullptr) {
+          return absl::FailedPreconditionError(absl::StrFormat(
+              "session %s has no stored map yet (state %s): EndSession stores it", name,
+              storage::sessionStateName(it->state)));
+        }
         return absl::FailedPreconditionError(absl::StrFormat(
-            "session %s has no stored map yet (state %s): EndSession stores it", name,
-            storage::sessionStateName(it->state)));
+            "session %s has no stored map (state %s): it was not ended before the server stopped "
+            "and its map was not kept",
+            name, storage::sessionStateName(it->state)));
       }
       // The session's own parameters decide its mesh; the server's its completion.
       Params params = options_.params;

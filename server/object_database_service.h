@@ -71,6 +71,11 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
                                                                  storage::SqliteStore* store);
   ~ObjectDatabaseService() override;  // stop()
 
+  // Queues, on the database thread, the ending of the sessions a stopped server left not ended
+  // that have a saved map (found by create()). Call once the server serves: until then, and for
+  // a server that never starts, nothing is written.
+  void startRecovery();
+
   // After the gRPC server stopped (no call in flight): waits for the workers, then ends every
   // session that did not end (its map is stored; if that fails it is stored as interrupted) and
   // runs the database queue dry. Later calls return at once.
@@ -118,9 +123,17 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // Every save_map_every (frame worker): a copy of the map to the database thread, which saves
   // it; skipped while the previous save is still waiting.
   void maybeSaveMap(const std::shared_ptr<LiveSession>& session);
+  // Database thread: a session whose stream is gone, saved once more if frames came after its
+  // last save (queued by the janitor).
+  void saveIdleMap(const std::shared_ptr<LiveSession>& session);
+  // Database thread: stores one save (skipped when the session has ended meanwhile).
+  void writeSavedMap(const std::shared_ptr<LiveSession>& session, const tsdf::TsdfLayer& map,
+                     const gsm::LabelBlocks& labels, int64_t frames, double copy_ms);
   // Database thread, at start: a session a stopped server left not ended, with a saved map, gets
   // that map's segments inserted and its scene stored, and stays INTERRUPTED.
   Status recoverSession(const storage::SessionInfo& stored);
+  // UNAVAILABLE while the session `name` is being ended from its saved map.
+  Status checkNotRecovering(const std::string& name);
   // Queues the database insert of each segment (frame workers wait when the queue is full; they
   // insert what they extracted even when their stream was cancelled: nothing extracted is lost).
   void queueInserts(const std::shared_ptr<LiveSession>& session,
@@ -145,9 +158,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::unique_ptr<database::ObjectDatabase> db_;  // used on the database thread only
   const std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
 
-  std::mutex mutex_;  // guards sessions_, workers_, stopped_
+  std::mutex mutex_;  // guards sessions_, recovering_, workers_, stopped_
   std::map<std::string, std::shared_ptr<LiveSession>> sessions_;
   std::set<std::string> recovering_;  // sessions whose saved maps are still being ended
+  std::vector<storage::SessionInfo> to_recover_;  // from create() to startRecovery()
   struct Worker {
     std::thread thread;
     std::shared_ptr<std::atomic<bool>> finished;

@@ -110,6 +110,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
     health->SetServingStatus(true);
     health->SetServingStatus(kObjectDatabaseServiceName, true);
   }
+  service->startRecovery();  // sessions a crash left open, from their saved maps
   std::unique_ptr<ObjdbServer> result(new ObjdbServer(
       options, std::move(store), std::move(service), std::move(server), address.host, port));
   logger("server")->info(

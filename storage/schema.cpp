@@ -103,9 +103,8 @@ CREATE INDEX merge_records_by_target ON merge_records(target);
 )sql";
 
 // Version 2: saved live maps of open sessions (a crash loses only the frames after the last
-// save), and the frame count a scene map was made from.
+// save).
 constexpr const char* kSchemaV2 = R"sql(
-ALTER TABLE scene_maps ADD COLUMN frames INTEGER NOT NULL DEFAULT 0;
 CREATE TABLE saved_maps (
   session_id INTEGER PRIMARY KEY REFERENCES sessions(id),
   voxel_size REAL NOT NULL,

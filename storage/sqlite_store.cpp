@@ -33,8 +33,10 @@ struct EncodedModel {
 namespace {
 
 constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
-constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks", "scene_label_blocks"};
-constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks", "saved_label_blocks"};
+constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks", "scene_label_blocks",
+                                 false};
+constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks", "saved_label_blocks",
+                                 true};
 
 // Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
 Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
@@ -721,15 +723,22 @@ Status SqliteStore::writeMap(const MapTables& tables, const std::string& session
       Statement map,
       Statement::prepare(*writer_,
                          absl::StrFormat("INSERT INTO %s(session_id, voxel_size, voxels_per_side, "
-                                         "blocks, frames, updated_at) VALUES (?, ?, ?, ?, ?, %s) "
+                                         "blocks, updated_at) VALUES (?, ?, ?, ?, %s) "
                                          "ON CONFLICT(session_id) DO UPDATE "
                                          "SET voxel_size = excluded.voxel_size, "
                                          "voxels_per_side = excluded.voxels_per_side, "
-                                         "blocks = excluded.blocks, frames = excluded.frames, "
+                                         "blocks = excluded.blocks, "
                                          "updated_at = excluded.updated_at",
                                          tables.maps, kNow)));
   map.bind(1, sid).bind(2, double(scene.voxelSize())).bind(3, int64_t(scene.voxelsPerSide()));
-  OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).bind(5, frames).run());
+  OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).run());
+  if (tables.has_frames) {
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement count,
+        Statement::prepare(*writer_, absl::StrFormat("UPDATE %s SET frames = ? WHERE session_id = ?",
+                                                     tables.maps)));
+    OBJDB_RETURN_IF_ERROR(count.bind(1, frames).bind(2, sid).run());
+  }
   // A block table's rows of this session replaced by `rows` (TSDF or label blocks).
   auto replaceBlocks = [&](const char* table, const char* column,
                            const std::vector<EncodedBlock>& rows) -> Status {
@@ -760,7 +769,8 @@ Status SqliteStore::putScene(const std::string& session,
   if (scene == nullptr) {
     return absl::InvalidArgumentError(absl::StrFormat("scene of session %s is null", session));
   }
-  OBJDB_RETURN_IF_ERROR(annotate(writeMap(kSceneTables, session, *scene, labels.get(), 0),
+  OBJDB_RETURN_IF_ERROR(annotate(writeMap(kSceneTables, session, *scene, labels.get(),
+                                          /*frames=*/0),
                                  absl::StrFormat("storing the scene of session %s", session)));
   std::lock_guard cache_lock(scene_mutex_);
   const size_t max = size_t(options_.max_cached_scenes);
@@ -827,9 +837,9 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::readMapTsdf(
       Statement m,
       Statement::prepare(connection,
                          absl::StrFormat("SELECT m.session_id, m.voxel_size, m.voxels_per_side, "
-                                         "m.frames FROM %s m JOIN sessions s ON s.id = "
+                                         "%s FROM %s m JOIN sessions s ON s.id = "
                                          "m.session_id WHERE s.name = ?",
-                                         tables.maps)));
+                                         tables.has_frames ? "m.frames" : "0", tables.maps)));
   m.bind(1, session);
   OBJDB_ASSIGN_OR_RETURN(const bool found, m.step());
   if (!found) return std::shared_ptr<const tsdf::TsdfLayer>();

@@ -51,6 +51,7 @@ struct MapTables {
   const char* maps;
   const char* blocks;
   const char* label_blocks;
+  bool has_frames;  // the map table has a `frames` column
 };
 
 enum class SessionState { kOpen, kEnded, kInterrupted };
@@ -193,7 +194,8 @@ class SqliteStore : public database::ModelStore {
   Status requireWriter() const;
   StatusOr<int64_t> sessionIdForWrite(const std::string& name);
   Status writeObservations(int64_t model_id, const EncodedModel& model, bool replace);
-  // A map (TSDF blocks, optional main labels) into `tables`, replacing the session's earlier one.
+  // A map (TSDF blocks, optional main labels) into `tables`, replacing the session's earlier one;
+  // `frames` is kept where the tables have the column (saved maps).
   Status writeMap(const MapTables& tables, const std::string& session,
                   const tsdf::TsdfLayer& scene, const gsm::LabelBlocks* labels, int64_t frames);
   // A map from `tables` (null when the session has none); `frames` gets its frame count.

@@ -703,6 +703,28 @@ TEST(ObjectDatabaseService, AnOpenSessionsMapIsSavedAndTheSaveGoesWhenItEnds) {
   EXPECT_NE(server->store().scene("monday").value(), nullptr);
 }
 
+// A session whose stream closed without EndSession keeps its map in memory: the frames after its
+// last save are saved once more, min(save_map_every, 5 s) after the stream went. (Every 3 s here:
+// 12 frames stream in well under that, so the frame worker saves nothing.)
+TEST(ObjectDatabaseService, AStreamThatClosedWithoutEndSessionGetsItsLastFramesSaved) {
+  ServerOptions options = loopbackOptions(scratchDbPath());
+  options.save_map_every = std::chrono::seconds(3);
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  constexpr size_t kFrames = 12;
+  ASSERT_TRUE(ingest(*stub, session("monday", kFrames)).status.ok());
+  int64_t frames = -1;
+  for (int attempt = 0; attempt < 500 && frames != int64_t(kFrames); ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    frames = server->store().savedMapFrames("monday").value();
+  }
+  EXPECT_EQ(frames, int64_t(kFrames)) << "the frames after the last save were not saved";
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "monday", &ended).ok());
+  EXPECT_EQ(server->store().savedMapFrames("monday").value(), -1);
+}
+
 // What a crash leaves: a session stored as open with a map saved after F frames, and the
 // segments extracted before. The next start ends it from the saved map, while serving: the
 // database then holds what the offline pipeline builds from those F frames flushed. The session

@@ -192,6 +192,7 @@ TEST(ObjdbServerCrash, KilledWhileStreamingLosesNothingItReported) {
     EXPECT_TRUE(std::count(ids.begin(), ids.end(), int64_t(id)) == 1) << "object " << id;
   }
   ASSERT_FALSE(objects.empty());
+  EXPECT_GT(recovered, 0) << "no killed session was ended from a saved map";
   std::printf("%zu kills; %zu objects of answered EndSessions, all stored; %d sessions ended "
               "from their saved maps\n",
               phases.size(), objects.size(), recovered);

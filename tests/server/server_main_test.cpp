@@ -81,8 +81,11 @@ TEST(ObjdbServerBinary, MissingOrMalformedValuesExitTwo) {
 
   result = runProcess({kServer, "--save-map-s", "-1"});
   EXPECT_EQ(result.exit_code, 2);
-  EXPECT_TRUE(contains(result.err, "--save-map-s must be a number of seconds in [0, 86400]"))
+  EXPECT_TRUE(contains(result.err, "--save-map-s must be 0 (never) or a number of seconds in "
+                                    "[0.001, 86400]"))
       << result.err;
+  result = runProcess({kServer, "--save-map-s", "0.0001"});
+  EXPECT_EQ(result.exit_code, 2);
   result = runProcess({kServer, "--save-map-s=often"});
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_TRUE(contains(result.err, "got \"often\"")) << result.err;
