@@ -1,7 +1,8 @@
-// `objdb db`: administration of a database file, offline and read-only — integrity check
-// (SQLite's and every blob's checksum), counts and sizes, the model list, export of a model's
-// surface cloud or mesh to PLY, and a session's scene completed by the merged models (paper
-// §III-C, scene completion) as a PLY mesh. Never writes to the database.
+// `objdb db`: administration of a database file, read-only — integrity check (SQLite's and every
+// blob's checksum), counts and sizes, the model list, export of a model's surface cloud or mesh
+// to PLY, a session's scene completed by the merged models (paper §III-C, scene completion) as a
+// PLY mesh, and an online backup into a new file. Never writes to the database.
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -27,8 +28,9 @@ constexpr const char* kUsage = R"(usage: objdb db check  --db FILE
        objdb db models --db FILE
        objdb db export --db FILE --model ID --out FILE.ply [--what cloud|mesh] [--min-weight W]
        objdb db complete --db FILE --session NAME --out FILE.ply [--config FILE] [--min-weight W]
+       objdb db backup --db FILE --out NEW_FILE
 
-Administration of an objdb database file (opened read-only; nothing is written).
+Administration of an objdb database file (opened read-only; nothing is written to it).
 
   check    SQLite's integrity_check and foreign-key check, then every blob's checksum and
            structure; lists each finding (table, row, column, problem); exit status 1 on any
@@ -44,6 +46,9 @@ Administration of an objdb database file (opened read-only; nothing is written).
            segments, verdict, filled voxels. Parameters: the session's stored ones, then
            --config on top (merging.* thresholds, tsdf.max_weight, tsdf.mesh_min_weight unless
            --min-weight is given)
+  backup   a consistent copy of the database in a new file (SQLite's backup API, one read
+           snapshot), also while objdb-server writes to it; the copy appears whole under its name
+           or not at all, and is checked like `check` does; exit status 1 if anything fails
 )";
 
 constexpr const char* kCommand = "db";
@@ -208,6 +213,23 @@ int complete(const storage::SqliteStore& store, const std::string& session, cons
   return 0;
 }
 
+int backup(const storage::SqliteStore& store, const std::string& out) {
+  const auto start = std::chrono::steady_clock::now();
+  const auto report = store.backupTo(out);
+  if (!report.ok()) return cli::reportError(kCommand, report.status());
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  std::printf("%s: backed up to %s, %lld pages (%.2f MB) in %.2f s\n", store.path().c_str(),
+              out.c_str(), (long long)report->pages, double(report->bytes) / 1e6, seconds);
+  storage::SqliteStoreOptions options;
+  options.read_only = true;
+  options.create_if_missing = false;
+  options.quick_check_on_open = false;  // check() below runs the full integrity check
+  const auto copy = storage::SqliteStore::open(out, options);
+  if (!copy.ok()) return cli::reportError(kCommand, copy.status());
+  return check(**copy);
+}
+
 }  // namespace
 
 int runDbCommand(int argc, char** argv) {
@@ -218,7 +240,7 @@ int runDbCommand(int argc, char** argv) {
     return 0;
   }
   if (action != "check" && action != "stats" && action != "models" && action != "export" &&
-      action != "complete") {
+      action != "complete" && action != "backup") {
     return cli::usageError(kCommand, "unknown action \"" + action + "\"", kUsage);
   }
   std::string db, out, what = "cloud", session, config;
@@ -268,6 +290,9 @@ int runDbCommand(int argc, char** argv) {
   if (action == "complete" && (session.empty() || out.empty())) {
     return cli::usageError(kCommand, "complete needs --session NAME and --out FILE.ply", kUsage);
   }
+  if (action == "backup" && out.empty()) {
+    return cli::usageError(kCommand, "backup needs --out NEW_FILE", kUsage);
+  }
   storage::SqliteStoreOptions options;
   options.read_only = true;
   options.create_if_missing = false;
@@ -279,6 +304,7 @@ int runDbCommand(int argc, char** argv) {
   if (action == "stats") return stats(**store);
   if (action == "models") return models(**store);
   if (action == "complete") return complete(**store, session, out, config, min_weight);
+  if (action == "backup") return backup(**store, out);
   return exportModel(**store, model_id, out, what, min_weight < 0.0 ? 3.0f : float(min_weight));
 }
 

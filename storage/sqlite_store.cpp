@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 
@@ -1094,6 +1095,65 @@ StatusOr<CheckReport> SqliteStore::check() const {
     }
   }
   OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return report;
+}
+
+StatusOr<BackupReport> SqliteStore::backupTo(const std::string& path) const {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) {
+    return absl::AlreadyExistsError(
+        absl::StrFormat("backup: %s exists; choose a new file (nothing was written)", path));
+  }
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  const std::string partial = path + ".partial";
+  std::filesystem::remove(partial, ec);  // a stale one from an interrupted backup
+  ConnectionOptions dest_options;
+  dest_options.create = true;
+  std::optional<Connection> dest;
+  {
+    auto opened = Connection::open(partial, dest_options);
+    if (!opened.ok()) return annotate(opened.status(), "backup: creating the copy");
+    dest.emplace(std::move(*opened));
+  }
+  BackupReport report;
+  auto copy = [&]() -> Status {
+    sqlite3_backup* backup = sqlite3_backup_init(dest->get(), "main", (*lease).get(), "main");
+    if (backup == nullptr) return sqliteStatus(sqlite3_errcode(dest->get()), dest->get(), "backup");
+    // Every page in one step: one read snapshot of the source (WAL: writers go on meanwhile).
+    int rc = SQLITE_OK;
+    for (int attempt = 0; attempt < 100; ++attempt) {
+      rc = sqlite3_backup_step(backup, -1);
+      if (rc != SQLITE_BUSY && rc != SQLITE_LOCKED) break;
+      sqlite3_sleep(50);
+    }
+    report.pages = sqlite3_backup_pagecount(backup);
+    const int finished = sqlite3_backup_finish(backup);
+    if (rc != SQLITE_DONE) return sqliteStatus(rc, dest->get(), "backup: copying pages");
+    OBJDB_RETURN_IF_ERROR(sqliteStatus(finished, dest->get(), "backup: finishing"));
+    OBJDB_ASSIGN_OR_RETURN(const int64_t page_size,
+                           dest->queryInt("PRAGMA page_size", "backup: page size"));
+    report.bytes = report.pages * page_size;
+    // The copy is a file of its own: WAL mode (as the store sets up new files), everything in
+    // the main file.
+    auto mode = Statement::prepare(*dest, "PRAGMA journal_mode=WAL");
+    if (!mode.ok()) return mode.status();
+    OBJDB_RETURN_IF_ERROR(mode->step().status());
+    return dest->exec("PRAGMA wal_checkpoint(TRUNCATE)", "backup: checkpointing the copy");
+  };
+  Status copied = copy();
+  dest.reset();  // closes the copy (synced: synchronous=FULL)
+  if (copied.ok()) {
+    std::filesystem::rename(partial, path, ec);
+    if (ec) {
+      copied = absl::UnavailableError(absl::StrFormat("backup: renaming %s to %s: %s", partial,
+                                                      path, ec.message()));
+    }
+  }
+  if (!copied.ok()) {
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(partial + suffix, ec);
+    return copied;
+  }
+  for (const char* suffix : {"-wal", "-shm"}) std::filesystem::remove(partial + suffix, ec);
   return report;
 }
 

@@ -54,6 +54,11 @@ struct MapTables {
   bool has_frames;  // the map table has a `frames` column
 };
 
+struct BackupReport {
+  int64_t pages = 0;
+  int64_t bytes = 0;  // pages · page size
+};
+
 enum class SessionState { kOpen, kEnded, kInterrupted };
 const char* sessionStateName(SessionState state);
 
@@ -186,6 +191,11 @@ class SqliteStore : public database::ModelStore {
   StatusOr<StoreStats> stats() const;
   // Copies the WAL into the database and truncates it (clean shutdown).
   Status checkpoint();
+  // An online backup: a consistent copy of the database (one read snapshot, through SQLite's
+  // backup API) in a new file at `path`, while writers carry on. The copy is written to
+  // `path`.partial, synced and renamed into place, so `path` is whole or absent. An existing
+  // `path` is ALREADY_EXISTS and left alone.
+  StatusOr<BackupReport> backupTo(const std::string& path) const;
 
  private:
   class ReaderLease;

@@ -72,6 +72,39 @@ TEST(DbCommand, ChecksDescribesAndExports) {
   EXPECT_NE(r.err.find("no object model 7"), std::string::npos) << r.err;
 }
 
+TEST(DbCommand, BacksUpIntoANewFileThatReadsTheSameAndNeverOverwrites) {
+  testing::TempDir dir;
+  const fs::path db = dir / "objects.sqlite";
+  writeDatabase(db);
+  const fs::path copy = dir / "copy.sqlite";
+  ProcessResult r = runProcess({kObjdb, "db", "backup", "--db", db.string(), "--out", copy.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("backed up to " + copy.string()), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 damaged, 0 SQLite findings: ok"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(copy.string() + ".partial"));
+  {
+    auto original = storage::SqliteStore::open(db.string()).value();
+    auto copied = storage::SqliteStore::open(copy.string()).value();
+    const std::vector<int64_t> ids = original->modelIds().value();
+    ASSERT_EQ(copied->modelIds().value(), ids);
+    for (int64_t id : ids) {
+      EXPECT_EQ(testing::diffModels(*copied->model(id).value(), *original->model(id).value()), "")
+          << id;
+    }
+    EXPECT_EQ(copied->mergeRecords().value().size(), 1u);
+    EXPECT_NE(copied->scene("s0").value(), nullptr);
+  }
+  // Never over an existing file; --out is required.
+  const auto size = fs::file_size(copy);
+  r = runProcess({kObjdb, "db", "backup", "--db", db.string(), "--out", copy.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("exists"), std::string::npos) << r.err;
+  EXPECT_EQ(fs::file_size(copy), size);
+  r = runProcess({kObjdb, "db", "backup", "--db", db.string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("backup needs --out NEW_FILE"), std::string::npos) << r.err;
+}
+
 TEST(DbCommand, CheckListsDamagedRowsAndExitsOne) {
   testing::TempDir dir;
   const fs::path db = dir / "objects.sqlite";
