@@ -48,7 +48,8 @@ Administration of an objdb database file (opened read-only; nothing is written t
            --min-weight is given)
   backup   a consistent copy of the database in a new file (SQLite's backup API, one read
            snapshot), also while objdb-server writes to it; the copy appears whole under its name
-           or not at all, and is checked like `check` does; exit status 1 if anything fails
+           or not at all, never over an existing file, and is checked like `check` does; exit
+           status 1 if anything fails
 )";
 
 constexpr const char* kCommand = "db";

@@ -50,10 +50,10 @@ options:
                           1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
   --auto-end-s N          end a session whose stream closed or broke after N seconds without
                           EndSession (its map is stored); 0 = never (default 600)
-  --save-map-s S          save each open session's map every S seconds (and once more a few
-                          seconds after its stream went), so that a crash loses only the
-                          frames after the last save: the next start ends the session from it;
-                          0 = never (default 60)
+  --save-map-s S          save each open session's map every S seconds (and, unless
+                          --auto-end-s is 0, once more a few seconds after its stream went), so
+                          that a crash loses only the frames after the last save: the next
+                          start ends the session from it; 0 = never (default 60)
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 

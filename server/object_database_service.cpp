@@ -391,38 +391,50 @@ StatusOr<std::unique_ptr<ObjectDatabaseService>> ObjectDatabaseService::create(
   OBJDB_RETURN_IF_ERROR(options.params.validate());
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<database::ObjectDatabase> db,
                          database::ObjectDatabase::create(options.params, store));
-  // Sessions a stopped server did not end: those with a saved map are ended from it (on the
-  // database thread, while the server serves); the others lost their maps.
+  // Sessions a stopped server did not end (read only: startRecovery writes).
   OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> sessions, store->sessions());
-  std::vector<storage::SessionInfo> to_recover;
+  std::vector<storage::SessionInfo> unended;
   for (const auto& s : sessions) {
-    if (s.state == storage::SessionState::kEnded) continue;
-    OBJDB_ASSIGN_OR_RETURN(const int64_t saved_frames, store->savedMapFrames(s.name));
-    if (saved_frames >= 0) to_recover.push_back(s);
-    if (s.state != storage::SessionState::kOpen) continue;
-    if (saved_frames < 0) {
-      logger("server")->warn("session {} was still open when the server last stopped and has no "
-                             "saved map; its map is lost (segments inserted before stay): "
-                             "marking it interrupted",
-                             s.name);
-    }
-    // Interrupted at once (it streams no more), whatever its recovery below does.
-    OBJDB_RETURN_IF_ERROR(
-        store->finishSession(s.name, storage::SessionState::kInterrupted, s.frames));
+    if (s.state != storage::SessionState::kEnded) unended.push_back(s);
   }
   std::unique_ptr<ObjectDatabaseService> service(
       new ObjectDatabaseService(options, store, std::move(db)));
-  service->to_recover_ = std::move(to_recover);
+  service->unended_ = std::move(unended);
   {
     std::lock_guard lock(service->mutex_);
-    for (const auto& s : service->to_recover_) service->recovering_.insert(s.name);
+    for (const auto& s : service->unended_) service->recovering_.insert(s.name);
   }
   return service;
 }
 
-void ObjectDatabaseService::startRecovery() {
+Status ObjectDatabaseService::startRecovery() {
+  std::vector<storage::SessionInfo> unended;
+  unended.swap(unended_);
+  // Those with a saved map are ended from it (on the database thread, while the server serves);
+  // the others lost their maps.
   std::vector<storage::SessionInfo> sessions;
-  sessions.swap(to_recover_);
+  Status status = absl::OkStatus();
+  for (const auto& s : unended) {
+    auto saved_frames = store_->savedMapFrames(s.name);
+    Status marked = saved_frames.status();
+    if (marked.ok() && s.state == storage::SessionState::kOpen) {
+      if (*saved_frames < 0) {
+        logger("server")->warn("session {} was still open when the server last stopped and has "
+                               "no saved map; its map is lost (segments inserted before stay): "
+                               "marking it interrupted",
+                               s.name);
+      }
+      // Interrupted at once (it streams no more), whatever its recovery below does.
+      marked = store_->finishSession(s.name, storage::SessionState::kInterrupted, s.frames);
+    }
+    if (marked.ok() && *saved_frames >= 0) {
+      sessions.push_back(s);
+      continue;
+    }
+    if (!marked.ok() && status.ok()) status = marked;
+    std::lock_guard lock(mutex_);
+    recovering_.erase(s.name);
+  }
   for (const auto& s : sessions) {
     database_queue_->push([this, s] {
       const Status recovered = recoverSession(s);
@@ -435,6 +447,7 @@ void ObjectDatabaseService::startRecovery() {
       recovering_.erase(s.name);
     });
   }
+  return status;
 }
 
 Status ObjectDatabaseService::checkNotRecovering(const std::string& name) {
@@ -1428,6 +1441,13 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
           return absl::FailedPreconditionError(absl::StrFormat(
               "session %s has no stored map yet (state %s): EndSession stores it", name,
               storage::sessionStateName(it->state)));
+        }
+        OBJDB_ASSIGN_OR_RETURN(const int64_t saved_frames, store_->savedMapFrames(name));
+        if (saved_frames >= 0) {
+          return absl::FailedPreconditionError(absl::StrFormat(
+              "session %s has no stored map: ending it from its map saved after %d frames failed "
+              "at this start (the server's log says why); the next start tries again",
+              name, saved_frames));
         }
         return absl::FailedPreconditionError(absl::StrFormat(
             "session %s has no stored map (state %s): it was not ended before the server stopped "

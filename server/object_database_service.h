@@ -71,10 +71,11 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
                                                                  storage::SqliteStore* store);
   ~ObjectDatabaseService() override;  // stop()
 
-  // Queues, on the database thread, the ending of the sessions a stopped server left not ended
-  // that have a saved map (found by create()). Call once the server serves: until then, and for
-  // a server that never starts, nothing is written.
-  void startRecovery();
+  // The sessions a stopped server left not ended (found by create()): open ones are marked
+  // INTERRUPTED, and those with a saved map are ended from it on the database thread. Call once
+  // the server listens: create() itself writes nothing, so a server that cannot start changes
+  // nothing. Errors: the store's (the first; the others are logged).
+  Status startRecovery();
 
   // After the gRPC server stopped (no call in flight): waits for the workers, then ends every
   // session that did not end (its map is stored; if that fails it is stored as interrupted) and
@@ -161,7 +162,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::mutex mutex_;  // guards sessions_, recovering_, workers_, stopped_
   std::map<std::string, std::shared_ptr<LiveSession>> sessions_;
   std::set<std::string> recovering_;  // sessions whose saved maps are still being ended
-  std::vector<storage::SessionInfo> to_recover_;  // from create() to startRecovery()
+  std::vector<storage::SessionInfo> unended_;  // from create() to startRecovery()
   struct Worker {
     std::thread thread;
     std::shared_ptr<std::atomic<bool>> finished;

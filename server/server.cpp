@@ -110,7 +110,11 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
     health->SetServingStatus(true);
     health->SetServingStatus(kObjectDatabaseServiceName, true);
   }
-  service->startRecovery();  // sessions a crash left open, from their saved maps
+  // Sessions a crash left open: interrupted, and ended from their saved maps.
+  if (Status recovered = service->startRecovery(); !recovered.ok()) {
+    server->Shutdown();
+    return annotate(recovered, "ending the sessions the last run left open");
+  }
   std::unique_ptr<ObjdbServer> result(new ObjdbServer(
       options, std::move(store), std::move(service), std::move(server), address.host, port));
   logger("server")->info(

@@ -1,6 +1,13 @@
 #include "storage/sqlite_store.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
+#include <random>
 #include <functional>
 #include <map>
 #include <optional>
@@ -183,7 +190,9 @@ class SqliteStore::ReaderLease {
 SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
     : path_(std::move(path)), options_(std::move(options)) {}
 
-SqliteStore::~SqliteStore() = default;
+SqliteStore::~SqliteStore() {
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+}
 
 StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
                                                          const SqliteStoreOptions& options) {
@@ -209,6 +218,29 @@ StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path
   co.busy_timeout_ms = options.busy_timeout_ms;
   co.synchronous = options.synchronous;
   OBJDB_ASSIGN_OR_RETURN(Connection connection, Connection::open(path, co));
+  if (!options.read_only) {
+    // One writer per file: the server and `objdb ingest` each keep an in-memory copy of what the
+    // database holds (the matcher's index), which a second writer would silently invalidate.
+    // An advisory lock on the file, released when the store closes (or its process dies).
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+      return absl::UnavailableError(
+          absl::StrFormat("opening %s to lock it: %s", path, std::strerror(errno)));
+    }
+    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int error = errno;
+      ::close(fd);
+      if (error == EWOULDBLOCK) {
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "%s is open for writing by another objdb process (objdb-server or objdb ingest); one "
+            "writer at a time (readers such as `objdb db` may open it meanwhile)",
+            path));
+      }
+      return absl::UnavailableError(
+          absl::StrFormat("locking %s: %s", path, std::strerror(error)));
+    }
+    store->lock_fd_ = fd;
+  }
   if (options.quick_check_on_open && exists) {
     OBJDB_ASSIGN_OR_RETURN(Statement check, Statement::prepare(connection, "PRAGMA quick_check"));
     auto row = check.step();
@@ -1098,21 +1130,54 @@ StatusOr<CheckReport> SqliteStore::check() const {
   return report;
 }
 
+namespace {
+
+void removeDatabaseFiles(const std::string& path) {
+  std::error_code ec;
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+    std::filesystem::remove(path + suffix, ec);
+  }
+}
+
+// A new, empty file next to `path` whose name nobody else uses (created with O_EXCL).
+StatusOr<std::string> createUniqueSibling(const std::string& path) {
+  std::random_device random;
+  for (int attempt = 0; attempt < 16; ++attempt) {
+    const std::string name = absl::StrFormat("%s.partial-%08x", path, random());
+    const int fd = ::open(name.c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
+    if (fd >= 0) {
+      ::close(fd);
+      return name;
+    }
+    if (errno != EEXIST) {
+      return absl::UnavailableError(
+          absl::StrFormat("backup: creating %s: %s", name, std::strerror(errno)));
+    }
+  }
+  return absl::UnavailableError(absl::StrFormat("backup: no free temporary name next to %s", path));
+}
+
+}  // namespace
+
 StatusOr<BackupReport> SqliteStore::backupTo(const std::string& path) const {
   std::error_code ec;
-  if (std::filesystem::exists(path, ec)) {
-    return absl::AlreadyExistsError(
-        absl::StrFormat("backup: %s exists; choose a new file (nothing was written)", path));
+  // A stale -wal or -journal of an earlier file of that name would be replayed over the copy.
+  for (const char* suffix : {"", "-wal", "-shm", "-journal"}) {
+    if (std::filesystem::exists(path + suffix, ec)) {
+      return absl::AlreadyExistsError(absl::StrFormat(
+          "backup: %s%s exists; choose a new file (nothing was written)", path, suffix));
+    }
   }
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
-  const std::string partial = path + ".partial";
-  std::filesystem::remove(partial, ec);  // a stale one from an interrupted backup
-  ConnectionOptions dest_options;
-  dest_options.create = true;
+  OBJDB_ASSIGN_OR_RETURN(const std::string partial, createUniqueSibling(path));
   std::optional<Connection> dest;
   {
+    ConnectionOptions dest_options;
     auto opened = Connection::open(partial, dest_options);
-    if (!opened.ok()) return annotate(opened.status(), "backup: creating the copy");
+    if (!opened.ok()) {
+      removeDatabaseFiles(partial);
+      return annotate(opened.status(), "backup: creating the copy");
+    }
     dest.emplace(std::move(*opened));
   }
   BackupReport report;
@@ -1121,7 +1186,7 @@ StatusOr<BackupReport> SqliteStore::backupTo(const std::string& path) const {
     if (backup == nullptr) return sqliteStatus(sqlite3_errcode(dest->get()), dest->get(), "backup");
     // Every page in one step: one read snapshot of the source (WAL: writers go on meanwhile).
     int rc = SQLITE_OK;
-    for (int attempt = 0; attempt < 100; ++attempt) {
+    for (int attempt = 0; attempt < 20; ++attempt) {
       rc = sqlite3_backup_step(backup, -1);
       if (rc != SQLITE_BUSY && rc != SQLITE_LOCKED) break;
       sqlite3_sleep(50);
@@ -1143,17 +1208,24 @@ StatusOr<BackupReport> SqliteStore::backupTo(const std::string& path) const {
   Status copied = copy();
   dest.reset();  // closes the copy (synced: synchronous=FULL)
   if (copied.ok()) {
-    std::filesystem::rename(partial, path, ec);
-    if (ec) {
-      copied = absl::UnavailableError(absl::StrFormat("backup: renaming %s to %s: %s", partial,
-                                                      path, ec.message()));
+    // link() never replaces: a file that appeared at `path` meanwhile stays as it is.
+    if (::link(partial.c_str(), path.c_str()) != 0) {
+      copied = errno == EEXIST
+                   ? absl::AlreadyExistsError(absl::StrFormat(
+                         "backup: %s appeared while the copy was made; it was left alone", path))
+                   : absl::UnavailableError(absl::StrFormat("backup: naming the copy %s: %s",
+                                                            path, std::strerror(errno)));
     }
   }
-  if (!copied.ok()) {
-    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(partial + suffix, ec);
-    return copied;
+  removeDatabaseFiles(partial);
+  if (!copied.ok()) return copied;
+  // The new name survives a power loss only once its directory is synced.
+  const std::string directory = std::filesystem::path(path).parent_path().string();
+  const int dir_fd = ::open(directory.empty() ? "." : directory.c_str(), O_RDONLY | O_CLOEXEC);
+  if (dir_fd >= 0) {
+    ::fsync(dir_fd);
+    ::close(dir_fd);
   }
-  for (const char* suffix : {"-wal", "-shm"}) std::filesystem::remove(partial + suffix, ec);
   return report;
 }
 

@@ -192,9 +192,10 @@ class SqliteStore : public database::ModelStore {
   // Copies the WAL into the database and truncates it (clean shutdown).
   Status checkpoint();
   // An online backup: a consistent copy of the database (one read snapshot, through SQLite's
-  // backup API) in a new file at `path`, while writers carry on. The copy is written to
-  // `path`.partial, synced and renamed into place, so `path` is whole or absent. An existing
-  // `path` is ALREADY_EXISTS and left alone.
+  // backup API) in a new file at `path`, while writers carry on (their commits do not wait; the
+  // WAL grows until the copy is done). The copy is written to a temporary file next to `path`,
+  // synced, and linked to `path`, so `path` is whole or absent and never replaced. An existing
+  // `path` (or a -wal, -shm or -journal of it) is ALREADY_EXISTS and left alone.
   StatusOr<BackupReport> backupTo(const std::string& path) const;
 
  private:
@@ -221,6 +222,7 @@ class SqliteStore : public database::ModelStore {
 
   std::string path_;
   SqliteStoreOptions options_;
+  int lock_fd_ = -1;  // holds the file's writer lock (flock), writable stores only
   SchemaState schema_;
   mutable std::mutex write_mutex_;  // one writer at a time
   std::optional<Connection> writer_;

@@ -289,7 +289,7 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
   }
 
   // A restart serves the same database.
-  server->shutdown();
+  server.reset();  // stops it and closes its file: one writer at a time
   server = startOrDie(loopbackOptions(db_path));
   ASSERT_NE(server, nullptr);
   stub = stubFor(*server);
@@ -598,7 +598,7 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   // after the restart it is ENDED with its scene.
   const IngestResult open = ingest(*stub, session("wednesday", 3));
   ASSERT_TRUE(open.status.ok()) << open.status.error_message();
-  server->shutdown();
+  server.reset();  // stops it and closes its file: one writer at a time
   server = startOrDie(loopbackOptions(db_path));
   ASSERT_NE(server, nullptr);
   stub = stubFor(*server);
@@ -786,7 +786,7 @@ TEST(ObjectDatabaseService, ASessionLeftOpenByACrashIsEndedFromItsSavedMapAtTheN
   EXPECT_TRUE(server->store().check().value().ok());
 
   // A second start has nothing left to recover and says the same.
-  server->shutdown();
+  server.reset();  // stops it and closes its file: one writer at a time
   server = startOrDie(loopbackOptions(db_path));
   ASSERT_NE(server, nullptr);
   stub = stubFor(*server);

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -116,7 +117,6 @@ TEST(SqliteStoreConcurrency, OnlineBackupsAreConsistentCopiesWhileAWriterCarries
   read_only.create_if_missing = false;
   for (const std::string& copy : copies) {
     SCOPED_TRACE(copy);
-    EXPECT_FALSE(std::filesystem::exists(copy + ".partial"));
     auto backup = SqliteStore::open(copy, read_only);
     ASSERT_TRUE(backup.ok()) << backup.status();
     const auto report = (*backup)->check();
@@ -132,10 +132,17 @@ TEST(SqliteStoreConcurrency, OnlineBackupsAreConsistentCopiesWhileAWriterCarries
   const auto again = store->backupTo(copies.front());
   EXPECT_EQ(again.status().code(), absl::StatusCode::kAlreadyExists) << again.status();
   EXPECT_EQ(std::filesystem::file_size(copies.front()), size);
-  // Nowhere to write: an error, nothing left behind.
-  const std::string nowhere = (dir / "missing" / "copy.sqlite").string();
-  EXPECT_FALSE(store->backupTo(nowhere).ok());
-  EXPECT_FALSE(std::filesystem::exists(nowhere + ".partial"));
+  // A stale WAL of that name would be replayed over a new copy: refused too.
+  const std::string stale = (dir / "stale.sqlite").string();
+  std::ofstream(stale + "-wal") << "old";
+  EXPECT_EQ(store->backupTo(stale).status().code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_FALSE(std::filesystem::exists(stale));
+  // Nowhere to write: an error.
+  EXPECT_FALSE(store->backupTo((dir / "missing" / "copy.sqlite").string()).ok());
+  // No temporary file is left behind by any of these.
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    EXPECT_EQ(entry.path().string().find(".partial"), std::string::npos) << entry.path();
+  }
 }
 
 }  // namespace

@@ -498,6 +498,30 @@ TEST(SqliteStore, OlderSchemasAreMigratedAndAFailedMigrationChangesNothing) {
   EXPECT_EQ(diffModels(*(*migrated)->model(1).value(), expected), "");
 }
 
+// One writer per file (the server and `objdb ingest` keep in-memory copies of what the file
+// holds): a second writable open is refused while the first is open, readers are not, and the
+// lock goes with the store.
+TEST(SqliteStore, ASecondWriterOnTheSameFileIsRefusedUntilTheFirstCloses) {
+  TempDir dir;
+  const std::string path = (dir / "db.sqlite").string();
+  auto first = SqliteStore::open(path);
+  ASSERT_TRUE(first.ok()) << first.status();
+  ASSERT_TRUE((*first)->addModel(makeStoreModel(1, 1)).ok());
+  const auto second = SqliteStore::open(path);
+  ASSERT_FALSE(second.ok());
+  EXPECT_EQ(second.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(second.status().message(), HasSubstr("open for writing by another objdb process"));
+  SqliteStoreOptions read_only;
+  read_only.read_only = true;
+  const auto reader = SqliteStore::open(path, read_only);
+  ASSERT_TRUE(reader.ok()) << reader.status();
+  EXPECT_EQ((*reader)->modelIds().value().size(), 1u);
+  first->reset();
+  const auto after = SqliteStore::open(path);
+  ASSERT_TRUE(after.ok()) << after.status();
+  EXPECT_TRUE((*after)->addModel(makeStoreModel(2, 1)).ok());
+}
+
 // This build's own migrations: a file of schema 1 (before saved live maps) opens as the current
 // schema with its models, and takes scenes and saved maps.
 TEST(SqliteStore, AFileOfTheFirstSchemaIsMigratedToTheCurrentOne) {
