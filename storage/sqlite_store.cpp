@@ -2,12 +2,15 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <random>
+#include <set>
+#include <mutex>
 #include <functional>
 #include <map>
 #include <optional>
@@ -190,9 +193,68 @@ class SqliteStore::ReaderLease {
 SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
     : path_(std::move(path)), options_(std::move(options)) {}
 
-SqliteStore::~SqliteStore() {
-  if (lock_fd_ >= 0) ::close(lock_fd_);
+namespace {
+
+// The files this process holds the writer lock of, by (device, inode).
+std::mutex g_locked_mutex;
+std::set<std::pair<uint64_t, uint64_t>> g_locked_files;
+
+Status heldElsewhere(const std::string& path) {
+  return absl::FailedPreconditionError(absl::StrFormat(
+      "%s is open for writing by another objdb process (objdb-server or objdb ingest); one "
+      "writer at a time (readers such as `objdb db` may open it meanwhile)",
+      path));
 }
+
+}  // namespace
+
+StatusOr<WriterLock> WriterLock::acquire(const std::string& path) {
+  // Held in this process already: refused before a second descriptor is opened (closing it
+  // would drop the other store's SQLite locks).
+  struct stat before {};
+  if (::stat(path.c_str(), &before) == 0) {
+    std::lock_guard lock(g_locked_mutex);
+    if (g_locked_files.count({uint64_t(before.st_dev), uint64_t(before.st_ino)}) > 0) {
+      return heldElsewhere(path);
+    }
+  }
+  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    return absl::UnavailableError(
+        absl::StrFormat("opening %s to lock it: %s", path, std::strerror(errno)));
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    const int error = errno;
+    ::close(fd);
+    return absl::UnavailableError(absl::StrFormat("%s: %s", path, std::strerror(error)));
+  }
+  std::lock_guard lock(g_locked_mutex);
+  const std::pair<uint64_t, uint64_t> key{uint64_t(st.st_dev), uint64_t(st.st_ino)};
+  if (g_locked_files.count(key) > 0 || ::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int error = errno;
+    const bool held = g_locked_files.count(key) > 0 || error == EWOULDBLOCK;
+    ::close(fd);
+    if (held) return heldElsewhere(path);
+    return absl::UnavailableError(absl::StrFormat("locking %s: %s", path, std::strerror(error)));
+  }
+  g_locked_files.insert(key);
+  return WriterLock(fd, key.first, key.second);
+}
+
+WriterLock::WriterLock(WriterLock&& other) noexcept
+    : fd_(other.fd_), device_(other.device_), inode_(other.inode_) {
+  other.fd_ = -1;
+}
+
+WriterLock::~WriterLock() {
+  if (fd_ < 0) return;
+  ::close(fd_);
+  std::lock_guard lock(g_locked_mutex);
+  g_locked_files.erase({device_, inode_});
+}
+
+SqliteStore::~SqliteStore() = default;
 
 StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
                                                          const SqliteStoreOptions& options) {
@@ -212,35 +274,19 @@ StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path
     return absl::FailedPreconditionError(absl::StrFormat("%s is not a regular file", path));
   }
   std::unique_ptr<SqliteStore> store(new SqliteStore(path, options));
+  if (!options.read_only) {
+    // One writer per file: the server and `objdb ingest` each keep an in-memory copy of what the
+    // database holds (the matcher's index), which a second writer would silently invalidate.
+    // Taken before any connection of this store opens the file.
+    OBJDB_ASSIGN_OR_RETURN(WriterLock lock, WriterLock::acquire(path));
+    store->writer_lock_.emplace(std::move(lock));
+  }
   ConnectionOptions co;
   co.read_only = options.read_only;
   co.create = !exists;
   co.busy_timeout_ms = options.busy_timeout_ms;
   co.synchronous = options.synchronous;
   OBJDB_ASSIGN_OR_RETURN(Connection connection, Connection::open(path, co));
-  if (!options.read_only) {
-    // One writer per file: the server and `objdb ingest` each keep an in-memory copy of what the
-    // database holds (the matcher's index), which a second writer would silently invalidate.
-    // An advisory lock on the file, released when the store closes (or its process dies).
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
-      return absl::UnavailableError(
-          absl::StrFormat("opening %s to lock it: %s", path, std::strerror(errno)));
-    }
-    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
-      const int error = errno;
-      ::close(fd);
-      if (error == EWOULDBLOCK) {
-        return absl::FailedPreconditionError(absl::StrFormat(
-            "%s is open for writing by another objdb process (objdb-server or objdb ingest); one "
-            "writer at a time (readers such as `objdb db` may open it meanwhile)",
-            path));
-      }
-      return absl::UnavailableError(
-          absl::StrFormat("locking %s: %s", path, std::strerror(error)));
-    }
-    store->lock_fd_ = fd;
-  }
   if (options.quick_check_on_open && exists) {
     OBJDB_ASSIGN_OR_RETURN(Statement check, Statement::prepare(connection, "PRAGMA quick_check"));
     auto row = check.step();

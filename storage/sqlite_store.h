@@ -59,6 +59,26 @@ struct BackupReport {
   int64_t bytes = 0;  // pages · page size
 };
 
+// One writer per database file: an advisory lock (flock) on a descriptor of the file, held while
+// a writable store is open. POSIX drops a process's fcntl locks on a file — SQLite's — when any
+// descriptor of that file is closed, so a process never opens a second descriptor for a file
+// it holds (a registry refuses that first), and the descriptor is closed only after the store's
+// connections.
+class WriterLock {
+ public:
+  // FAILED_PRECONDITION when another store, in this process or another, holds it.
+  static StatusOr<WriterLock> acquire(const std::string& path);
+  WriterLock(WriterLock&& other) noexcept;
+  WriterLock& operator=(WriterLock&&) = delete;
+  WriterLock(const WriterLock&) = delete;
+  ~WriterLock();
+
+ private:
+  WriterLock(int fd, uint64_t device, uint64_t inode) : fd_(fd), device_(device), inode_(inode) {}
+  int fd_ = -1;
+  uint64_t device_ = 0, inode_ = 0;
+};
+
 enum class SessionState { kOpen, kEnded, kInterrupted };
 const char* sessionStateName(SessionState state);
 
@@ -222,7 +242,9 @@ class SqliteStore : public database::ModelStore {
 
   std::string path_;
   SqliteStoreOptions options_;
-  int lock_fd_ = -1;  // holds the file's writer lock (flock), writable stores only
+  // The file's writer lock (writable stores only). Declared before the connections, so that it
+  // is released after they are closed.
+  std::optional<WriterLock> writer_lock_;
   SchemaState schema_;
   mutable std::mutex write_mutex_;  // one writer at a time
   std::optional<Connection> writer_;

@@ -166,6 +166,34 @@ TEST(ObjdbServerBinary, ADatabaseFileItCannotServeRefusesTheStartUntouched) {
   EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), std::string(4096, 'n'));
 }
 
+// Two servers on one database file would each keep their own copy of its index: the second
+// refuses to start, and the first serves on; once it stops, the file can be opened again.
+TEST(ObjdbServerBinary, ASecondServerOnTheSameDatabaseRefusesToStart) {
+  TempDir dir;
+  const std::string db = (dir / "db.sqlite").string();
+  ChildProcess first({kServer, "--listen", "127.0.0.1:0", "--db", db});
+  ASSERT_TRUE(first.started());
+  ASSERT_TRUE(first.waitForStderr(kListening, kStartTimeout)) << first.stderrText();
+  ASSERT_TRUE(first.waitForStderr("\n", kStartTimeout));
+  const std::string address = listeningAddress(first.stderrText());
+
+  ProcessResult second = runProcess({kServer, "--listen", "127.0.0.1:0", "--db", db});
+  EXPECT_EQ(second.exit_code, 1);
+  EXPECT_TRUE(contains(second.err, "open for writing by another objdb process")) << second.err;
+  EXPECT_FALSE(contains(second.err, "listening on")) << second.err;
+  grpc::health::v1::HealthCheckResponse response;
+  ASSERT_TRUE(checkHealth(address, &response).ok());
+  EXPECT_EQ(response.status(), grpc::health::v1::HealthCheckResponse::SERVING);
+
+  ASSERT_TRUE(first.sendSignal(SIGTERM));
+  EXPECT_EQ(first.wait(std::chrono::seconds(60)).exit_code, 0);
+  ChildProcess third({kServer, "--listen", "127.0.0.1:0", "--db", db});
+  ASSERT_TRUE(third.started());
+  EXPECT_TRUE(third.waitForStderr(kListening, kStartTimeout)) << third.stderrText();
+  ASSERT_TRUE(third.sendSignal(SIGTERM));
+  EXPECT_EQ(third.wait(std::chrono::seconds(60)).exit_code, 0);
+}
+
 TEST(ObjdbServerBinary, MalformedListenAddressRefusesToStart) {
   const ProcessResult result = runProcess({kServer, "--listen=localhost"});
   EXPECT_EQ(result.exit_code, 1);
