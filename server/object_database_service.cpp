@@ -415,6 +415,11 @@ Status ObjectDatabaseService::startRecovery() {
   std::vector<storage::SessionInfo> sessions;
   Status status = absl::OkStatus();
   for (const auto& s : unended) {
+    if (!status.ok()) {  // the start fails: nothing more is written
+      std::lock_guard lock(mutex_);
+      recovering_.erase(s.name);
+      continue;
+    }
     auto saved_frames = store_->savedMapFrames(s.name);
     Status marked = saved_frames.status();
     if (marked.ok() && s.state == storage::SessionState::kOpen) {
@@ -431,9 +436,16 @@ Status ObjectDatabaseService::startRecovery() {
       sessions.push_back(s);
       continue;
     }
-    if (!marked.ok() && status.ok()) status = marked;
+    if (!marked.ok()) status = annotate(marked, absl::StrFormat("session %s", s.name));
     std::lock_guard lock(mutex_);
     recovering_.erase(s.name);
+  }
+  if (!status.ok()) {
+    for (const auto& s : sessions) {
+      std::lock_guard lock(mutex_);
+      recovering_.erase(s.name);
+    }
+    return status;
   }
   for (const auto& s : sessions) {
     database_queue_->push([this, s] {

@@ -74,7 +74,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // The sessions a stopped server left not ended (found by create()): open ones are marked
   // INTERRUPTED, and those with a saved map are ended from it on the database thread. Call once
   // the server listens: create() itself writes nothing, so a server that cannot start changes
-  // nothing. Errors: the store's (the first; the others are logged).
+  // nothing. Errors: the store's; at the first, nothing more is marked or queued.
   Status startRecovery();
 
   // After the gRPC server stopped (no call in flight): waits for the workers, then ends every

@@ -106,14 +106,15 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
         "permitted", options.tls_cert_file.empty() ? "" : ", or the TLS certificate and key are "
         "not valid PEM or do not belong together"));
   }
+  // Sessions a crash left open: interrupted, and ended from their saved maps (before health
+  // says SERVING; a call that came in meanwhile is cancelled if this fails).
+  if (Status recovered = service->startRecovery(); !recovered.ok()) {
+    server->Shutdown(std::chrono::system_clock::now());
+    return annotate(recovered, "ending the sessions the last run left open");
+  }
   if (grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService()) {
     health->SetServingStatus(true);
     health->SetServingStatus(kObjectDatabaseServiceName, true);
-  }
-  // Sessions a crash left open: interrupted, and ended from their saved maps.
-  if (Status recovered = service->startRecovery(); !recovered.ok()) {
-    server->Shutdown();
-    return annotate(recovered, "ending the sessions the last run left open");
   }
   std::unique_ptr<ObjdbServer> result(new ObjdbServer(
       options, std::move(store), std::move(service), std::move(server), address.host, port));

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <random>
@@ -195,63 +196,84 @@ SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
 
 namespace {
 
-// The files this process holds the writer lock of, by (device, inode).
-std::mutex g_locked_mutex;
-std::set<std::pair<uint64_t, uint64_t>> g_locked_files;
+// The database files this process's stores have open, by (device, inode).
+struct OpenFile {
+  int fd = -1;       // the one descriptor of the file this process opens itself
+  int stores = 0;    // registered stores
+  bool writer = false;
+};
+std::mutex g_files_mutex;
+std::map<std::pair<uint64_t, uint64_t>, OpenFile> g_files;
 
-Status heldElsewhere(const std::string& path) {
+Status heldByAnotherWriter(const std::string& path) {
   return absl::FailedPreconditionError(absl::StrFormat(
-      "%s is open for writing by another objdb process (objdb-server or objdb ingest); one "
-      "writer at a time (readers such as `objdb db` may open it meanwhile)",
+      "%s is open for writing by another objdb store (objdb-server or objdb ingest, in this "
+      "process or another); one writer at a time (readers such as `objdb db` may open it "
+      "meanwhile)",
       path));
 }
 
 }  // namespace
 
-StatusOr<WriterLock> WriterLock::acquire(const std::string& path) {
-  // Held in this process already: refused before a second descriptor is opened (closing it
-  // would drop the other store's SQLite locks).
-  struct stat before {};
-  if (::stat(path.c_str(), &before) == 0) {
-    std::lock_guard lock(g_locked_mutex);
-    if (g_locked_files.count({uint64_t(before.st_dev), uint64_t(before.st_ino)}) > 0) {
-      return heldElsewhere(path);
-    }
-  }
-  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    return absl::UnavailableError(
-        absl::StrFormat("opening %s to lock it: %s", path, std::strerror(errno)));
-  }
+StatusOr<FileRegistration> FileRegistration::acquire(const std::string& path, bool writer) {
+  std::lock_guard lock(g_files_mutex);
   struct stat st {};
-  if (::fstat(fd, &st) != 0) {
-    const int error = errno;
-    ::close(fd);
-    return absl::UnavailableError(absl::StrFormat("%s: %s", path, std::strerror(error)));
+  if (::stat(path.c_str(), &st) != 0) {
+    return absl::UnavailableError(absl::StrFormat("%s: %s", path, std::strerror(errno)));
   }
-  std::lock_guard lock(g_locked_mutex);
   const std::pair<uint64_t, uint64_t> key{uint64_t(st.st_dev), uint64_t(st.st_ino)};
-  if (g_locked_files.count(key) > 0 || ::flock(fd, LOCK_EX | LOCK_NB) != 0) {
-    const int error = errno;
-    const bool held = g_locked_files.count(key) > 0 || error == EWOULDBLOCK;
-    ::close(fd);
-    if (held) return heldElsewhere(path);
-    return absl::UnavailableError(absl::StrFormat("locking %s: %s", path, std::strerror(error)));
+  auto it = g_files.find(key);
+  if (it == g_files.end()) {
+    // No store of this process has the file open: no SQLite lock of ours can be dropped by
+    // closing this descriptor should the lock below fail.
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+      return absl::UnavailableError(
+          absl::StrFormat("opening %s: %s", path, std::strerror(errno)));
+    }
+    if (writer && ::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int error = errno;
+      ::close(fd);
+      if (error == EWOULDBLOCK) return heldByAnotherWriter(path);
+      return absl::UnavailableError(absl::StrFormat("locking %s: %s", path, std::strerror(error)));
+    }
+    g_files[key] = OpenFile{fd, 1, writer};
+    return FileRegistration(key.first, key.second, writer);
   }
-  g_locked_files.insert(key);
-  return WriterLock(fd, key.first, key.second);
+  OpenFile& file = it->second;
+  if (writer) {
+    if (file.writer) return heldByAnotherWriter(path);
+    if (::flock(file.fd, LOCK_EX | LOCK_NB) != 0) {
+      const int error = errno;
+      if (error == EWOULDBLOCK) return heldByAnotherWriter(path);
+      return absl::UnavailableError(absl::StrFormat("locking %s: %s", path, std::strerror(error)));
+    }
+    file.writer = true;
+  }
+  ++file.stores;
+  return FileRegistration(key.first, key.second, writer);
 }
 
-WriterLock::WriterLock(WriterLock&& other) noexcept
-    : fd_(other.fd_), device_(other.device_), inode_(other.inode_) {
-  other.fd_ = -1;
+FileRegistration::FileRegistration(FileRegistration&& other) noexcept
+    : device_(other.device_), inode_(other.inode_), writer_(other.writer_),
+      active_(other.active_) {
+  other.active_ = false;
 }
 
-WriterLock::~WriterLock() {
-  if (fd_ < 0) return;
-  ::close(fd_);
-  std::lock_guard lock(g_locked_mutex);
-  g_locked_files.erase({device_, inode_});
+FileRegistration::~FileRegistration() {
+  if (!active_) return;
+  std::lock_guard lock(g_files_mutex);
+  const auto it = g_files.find({device_, inode_});
+  if (it == g_files.end()) return;
+  OpenFile& file = it->second;
+  if (writer_) {
+    ::flock(file.fd, LOCK_UN);  // unlocking keeps the descriptor: no SQLite lock is dropped
+    file.writer = false;
+  }
+  if (--file.stores == 0) {
+    ::close(file.fd);  // the last store of this file: its connections are closed already
+    g_files.erase(it);
+  }
 }
 
 SqliteStore::~SqliteStore() = default;
@@ -274,13 +296,21 @@ StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path
     return absl::FailedPreconditionError(absl::StrFormat("%s is not a regular file", path));
   }
   std::unique_ptr<SqliteStore> store(new SqliteStore(path, options));
-  if (!options.read_only) {
-    // One writer per file: the server and `objdb ingest` each keep an in-memory copy of what the
-    // database holds (the matcher's index), which a second writer would silently invalidate.
-    // Taken before any connection of this store opens the file.
-    OBJDB_ASSIGN_OR_RETURN(WriterLock lock, WriterLock::acquire(path));
-    store->writer_lock_.emplace(std::move(lock));
+  if (!exists) {
+    // Created here (empty: SQLite sets it up as a new database) so that the store can register
+    // the file before any connection opens it.
+    const int fd = ::open(path.c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
+    if (fd < 0) {
+      return absl::UnavailableError(
+          absl::StrFormat("creating %s: %s", path, std::strerror(errno)));
+    }
+    ::close(fd);  // a new file: no connection of this process has it open
   }
+  // One writer per file: the server and `objdb ingest` each keep an in-memory copy of what the
+  // database holds (the matcher's index), which a second writer would silently invalidate.
+  OBJDB_ASSIGN_OR_RETURN(FileRegistration registration,
+                         FileRegistration::acquire(path, !options.read_only));
+  store->registration_.emplace(std::move(registration));
   ConnectionOptions co;
   co.read_only = options.read_only;
   co.create = !exists;
@@ -1254,8 +1284,13 @@ StatusOr<BackupReport> SqliteStore::backupTo(const std::string& path) const {
   Status copied = copy();
   dest.reset();  // closes the copy (synced: synchronous=FULL)
   if (copied.ok()) {
-    // link() never replaces: a file that appeared at `path` meanwhile stays as it is.
-    if (::link(partial.c_str(), path.c_str()) != 0) {
+    // link() never replaces: a file that appeared at `path` meanwhile stays as it is. Where
+    // the file system has no hard links, a rename that never replaces either.
+    int named = ::link(partial.c_str(), path.c_str());
+    if (named != 0 && (errno == EPERM || errno == EOPNOTSUPP || errno == ENOSYS)) {
+      named = ::renameat2(AT_FDCWD, partial.c_str(), AT_FDCWD, path.c_str(), RENAME_NOREPLACE);
+    }
+    if (named != 0) {
       copied = errno == EEXIST
                    ? absl::AlreadyExistsError(absl::StrFormat(
                          "backup: %s appeared while the copy was made; it was left alone", path))

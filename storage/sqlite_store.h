@@ -59,24 +59,27 @@ struct BackupReport {
   int64_t bytes = 0;  // pages · page size
 };
 
-// One writer per database file: an advisory lock (flock) on a descriptor of the file, held while
-// a writable store is open. POSIX drops a process's fcntl locks on a file — SQLite's — when any
-// descriptor of that file is closed, so a process never opens a second descriptor for a file
-// it holds (a registry refuses that first), and the descriptor is closed only after the store's
-// connections.
-class WriterLock {
+// Every store's hold on its database file, process-wide. One writer per file: a writable store
+// takes an advisory lock (flock) on the file. POSIX drops a process's fcntl locks on a file —
+// SQLite's — when any descriptor of that file is closed, so the process keeps one descriptor per
+// file, shared by all its stores (read-only ones too), and closes it only when the last of them
+// has closed its connections.
+class FileRegistration {
  public:
-  // FAILED_PRECONDITION when another store, in this process or another, holds it.
-  static StatusOr<WriterLock> acquire(const std::string& path);
-  WriterLock(WriterLock&& other) noexcept;
-  WriterLock& operator=(WriterLock&&) = delete;
-  WriterLock(const WriterLock&) = delete;
-  ~WriterLock();
+  // Registers a store of `path` (which must exist); `writer`: also takes the writer lock.
+  // FAILED_PRECONDITION when another writer (in this process or another) holds it.
+  static StatusOr<FileRegistration> acquire(const std::string& path, bool writer);
+  FileRegistration(FileRegistration&& other) noexcept;
+  FileRegistration& operator=(FileRegistration&&) = delete;
+  FileRegistration(const FileRegistration&) = delete;
+  ~FileRegistration();
 
  private:
-  WriterLock(int fd, uint64_t device, uint64_t inode) : fd_(fd), device_(device), inode_(inode) {}
-  int fd_ = -1;
+  FileRegistration(uint64_t device, uint64_t inode, bool writer)
+      : device_(device), inode_(inode), writer_(writer), active_(true) {}
   uint64_t device_ = 0, inode_ = 0;
+  bool writer_ = false;
+  bool active_ = false;
 };
 
 enum class SessionState { kOpen, kEnded, kInterrupted };
@@ -242,9 +245,9 @@ class SqliteStore : public database::ModelStore {
 
   std::string path_;
   SqliteStoreOptions options_;
-  // The file's writer lock (writable stores only). Declared before the connections, so that it
-  // is released after they are closed.
-  std::optional<WriterLock> writer_lock_;
+  // This store's hold on its file (and the writer lock, for a writable store). Declared before
+  // the connections, so that it is released after they are closed.
+  std::optional<FileRegistration> registration_;
   SchemaState schema_;
   mutable std::mutex write_mutex_;  // one writer at a time
   std::optional<Connection> writer_;

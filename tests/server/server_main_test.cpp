@@ -179,7 +179,7 @@ TEST(ObjdbServerBinary, ASecondServerOnTheSameDatabaseRefusesToStart) {
 
   ProcessResult second = runProcess({kServer, "--listen", "127.0.0.1:0", "--db", db});
   EXPECT_EQ(second.exit_code, 1);
-  EXPECT_TRUE(contains(second.err, "open for writing by another objdb process")) << second.err;
+  EXPECT_TRUE(contains(second.err, "open for writing by another objdb store")) << second.err;
   EXPECT_FALSE(contains(second.err, "listening on")) << second.err;
   grpc::health::v1::HealthCheckResponse response;
   ASSERT_TRUE(checkHealth(address, &response).ok());

@@ -510,7 +510,7 @@ TEST(SqliteStore, ASecondWriterOnTheSameFileIsRefusedUntilTheFirstCloses) {
   const auto second = SqliteStore::open(path);
   ASSERT_FALSE(second.ok());
   EXPECT_EQ(second.status().code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_THAT(second.status().message(), HasSubstr("open for writing by another objdb process"));
+  EXPECT_THAT(second.status().message(), HasSubstr("open for writing by another objdb store"));
   SqliteStoreOptions read_only;
   read_only.read_only = true;
   const auto reader = SqliteStore::open(path, read_only);
