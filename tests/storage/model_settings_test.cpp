@@ -20,15 +20,14 @@ SessionInfo session(const std::string& name, const Params& params) {
 
 TEST(CheckModelSettings, AnEmptyDatabaseOrUnrecordedSessionsAcceptAnything) {
   EXPECT_TRUE(checkModelSettings({}, Params{}).ok());
-  SessionInfo old_file;  // written before sessions recorded their parameters
-  old_file.name = "monday";
-  old_file.params_json = "{}";
-  SessionInfo text;
-  text.name = "tuesday";
-  text.params_json = "config file lounge.json";
+  std::vector<SessionInfo> stored(2);
+  stored[0].name = "monday";  // written before sessions recorded their parameters
+  stored[0].params_json = "{}";
+  stored[1].name = "tuesday";
+  stored[1].params_json = "config file lounge.json";
   Params other;
   other.descriptors.surface_spacing_m = 0.0f;
-  EXPECT_TRUE(checkModelSettings({old_file, text}, other).ok());
+  EXPECT_TRUE(checkModelSettings(stored, other).ok());
 }
 
 TEST(CheckModelSettings, TheSameDescriptionPassesAndOtherModulesMayDiffer) {
