@@ -118,11 +118,12 @@ uint32_t pageSize(uint32_t requested) {
   return requested == 0 ? kDefaultPageSize : std::min(requested, kMaxPageSize);
 }
 
-// Whether a stored raw segment is `segment`: the same map voxels (in world voxel indices) and the
-// same TSDF values around them. Then re-inserting it would change nothing; a label observed
-// again after its extraction has new TSDF values even where its voxels stayed.
+// Whether a stored raw segment is `segment`: the same pose (hence the same grid origin), the same
+// voxels (both lists in extractRawSegment's order) and the same TSDF values around them. Then
+// re-inserting it would change nothing; a label observed again after its extraction has new TSDF
+// values even where its voxels stayed.
 bool sameSegment(const database::RawSegmentRecord& stored, const gsm::RawSegment& segment) {
-  if (stored.voxels.size() != segment.label_voxels.size() || stored.grid == nullptr ||
+  if (stored.grid == nullptr || stored.voxels != segment.label_voxels ||
       stored.grid->voxelSize() != segment.grid.voxelSize() ||
       stored.grid->voxelsPerSide() != segment.grid.voxelsPerSide() ||
       stored.grid->numBlocks() != segment.grid.numBlocks() ||
@@ -138,17 +139,7 @@ bool sameSegment(const database::RawSegmentRecord& stored, const gsm::RawSegment
       if (a.distance != b.distance || a.weight != b.weight) return false;
     }
   }
-  const double voxel = double(segment.grid.voxelSize());
-  const auto originOf = [voxel](const Transform& T) -> Eigen::Vector3i {
-    return (T.translation() / voxel).array().round().cast<int>();
-  };
-  const Eigen::Vector3i a = originOf(stored.T_world_segment), b = originOf(segment.T_world_segment);
-  std::vector<std::array<int, 3>> x, y;
-  for (const auto& v : stored.voxels) x.push_back({v.x() + a.x(), v.y() + a.y(), v.z() + a.z()});
-  for (const auto& v : segment.label_voxels) y.push_back({v.x() + b.x(), v.y() + b.y(), v.z() + b.z()});
-  std::sort(x.begin(), x.end());
-  std::sort(y.begin(), y.end());
-  return x == y;
+  return true;
 }
 
 // How long after its stream went a session still open gets its last frames saved.
@@ -219,6 +210,10 @@ struct LiveSession {
   v1::SessionCounters snapshot() {
     std::lock_guard lock(mutex);
     return counters;
+  }
+  bool ended() {
+    std::lock_guard lock(mutex);
+    return state == v1::SESSION_STATE_ENDED;
   }
 };
 
@@ -411,18 +406,13 @@ Status ObjectDatabaseService::startRecovery() {
   std::vector<storage::SessionInfo> unended;
   unended.swap(unended_);
   // Those with a saved map are ended from it (on the database thread, while the server serves);
-  // the others lost their maps.
-  std::vector<storage::SessionInfo> sessions;
+  // the others lost their maps. At the first store error nothing more is written.
+  std::vector<storage::SessionInfo> queued;
   Status status = absl::OkStatus();
   for (const auto& s : unended) {
-    if (!status.ok()) {  // the start fails: nothing more is written
-      std::lock_guard lock(mutex_);
-      recovering_.erase(s.name);
-      continue;
-    }
     auto saved_frames = store_->savedMapFrames(s.name);
-    Status marked = saved_frames.status();
-    if (marked.ok() && s.state == storage::SessionState::kOpen) {
+    status = saved_frames.status();
+    if (status.ok() && s.state == storage::SessionState::kOpen) {
       if (*saved_frames < 0) {
         logger("server")->warn("session {} was still open when the server last stopped and has "
                                "no saved map; its map is lost (segments inserted before stay): "
@@ -430,24 +420,21 @@ Status ObjectDatabaseService::startRecovery() {
                                s.name);
       }
       // Interrupted at once (it streams no more), whatever its recovery below does.
-      marked = store_->finishSession(s.name, storage::SessionState::kInterrupted, s.frames);
+      status = store_->finishSession(s.name, storage::SessionState::kInterrupted, s.frames);
     }
-    if (marked.ok() && *saved_frames >= 0) {
-      sessions.push_back(s);
-      continue;
+    if (!status.ok()) {
+      status = annotate(status, absl::StrFormat("session %s", s.name));
+      queued.clear();
+      break;
     }
-    if (!marked.ok()) status = annotate(marked, absl::StrFormat("session %s", s.name));
+    if (*saved_frames >= 0) queued.push_back(s);
+  }
+  {
     std::lock_guard lock(mutex_);
-    recovering_.erase(s.name);
+    for (const auto& s : unended) recovering_.erase(s.name);
+    for (const auto& s : queued) recovering_.insert(s.name);
   }
-  if (!status.ok()) {
-    for (const auto& s : sessions) {
-      std::lock_guard lock(mutex_);
-      recovering_.erase(s.name);
-    }
-    return status;
-  }
-  for (const auto& s : sessions) {
+  for (const auto& s : queued) {
     database_queue_->push([this, s] {
       const Status recovered = recoverSession(s);
       if (!recovered.ok()) {
@@ -462,6 +449,21 @@ Status ObjectDatabaseService::startRecovery() {
   return status;
 }
 
+Params ObjectDatabaseService::storedSessionParams(const storage::SessionInfo& stored) const {
+  Params params = options_.params;
+  if (Status applied = applyParamsJson(stored.params_json, &params); !applied.ok()) {
+    params = options_.params;
+  }
+  return params;
+}
+
+Status ObjectDatabaseService::recoveryFailed(const std::string& name, int64_t saved_frames) {
+  return absl::FailedPreconditionError(absl::StrFormat(
+      "session %s was not ended before the server stopped; ending it from its map saved after %d "
+      "frames failed at this start (the server's log says why); the next start tries again",
+      name, saved_frames));
+}
+
 Status ObjectDatabaseService::checkNotRecovering(const std::string& name) {
   std::lock_guard lock(mutex_);
   if (recovering_.count(name) == 0) return absl::OkStatus();
@@ -474,10 +476,7 @@ Status ObjectDatabaseService::checkNotRecovering(const std::string& name) {
 Status ObjectDatabaseService::recoverSession(const storage::SessionInfo& stored) {
   OBJDB_ASSIGN_OR_RETURN(const storage::SavedMap saved, store_->savedMap(stored.name));
   if (saved.map == nullptr) return absl::OkStatus();
-  Params params = options_.params;
-  if (Status applied = applyParamsJson(stored.params_json, &params); !applied.ok()) {
-    params = options_.params;
-  }
+  const Params params = storedSessionParams(stored);
   logger("server")->warn("session {} was not ended when the server last stopped: ending it from "
                          "its map saved after {} frames (the frames after it are lost)",
                          stored.name, saved.frames);
@@ -564,10 +563,7 @@ void ObjectDatabaseService::endIdleSessions() {
 }
 
 Status ObjectDatabaseService::endByServer(LiveSession& session) {
-  {
-    std::lock_guard lock(session.mutex);
-    if (session.state == v1::SESSION_STATE_ENDED) return absl::OkStatus();
-  }
+  if (session.ended()) return absl::OkStatus();
   const Status ended = flush(session);
   if (!ended.ok()) {
     logger("server")->error("session {} could not be ended: {}", session.name,
@@ -802,10 +798,7 @@ void ObjectDatabaseService::endStreaming(const std::shared_ptr<LiveSession>& ses
   if (interrupted) {
     // Stored on the database thread, so that it lands before any EndSession flush queued later.
     database_queue_->push([this, session] {
-      {
-        std::lock_guard lock(session->mutex);
-        if (session->state == v1::SESSION_STATE_ENDED) return;
-      }
+      if (session->ended()) return;
       (void)store_->finishSession(session->name, storage::SessionState::kInterrupted,
                                   int64_t(session->snapshot().frames_integrated()));
     });
@@ -904,6 +897,27 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
   maybeSaveMap(stream_ptr->session);
 }
 
+// A copy of a live map to save, made by the thread that owns the map.
+struct MapCopy {
+  std::shared_ptr<const tsdf::TsdfLayer> map;
+  std::shared_ptr<const gsm::LabelBlocks> labels;
+  int64_t frames = 0;
+  double copy_ms = 0.0;
+};
+
+namespace {
+
+MapCopy copyMap(const gsm::Gsm& map) {
+  const auto start = std::chrono::steady_clock::now();
+  MapCopy copy{std::make_shared<const tsdf::TsdfLayer>(map.tsdf().clone()),
+               std::make_shared<const gsm::LabelBlocks>(map.mainLabelBlocks()), map.frames()};
+  copy.copy_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return copy;
+}
+
+}  // namespace
+
 void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& session) {
   if (options_.save_map_every.count() <= 0) return;
   const auto now = std::chrono::steady_clock::now();
@@ -914,54 +928,31 @@ void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& ses
   if (now - session->map_saved_at < options_.save_map_every || session->map_save_pending) return;
   session->map_saved_at = now;
   session->map_save_pending = true;
-  auto map = std::make_shared<const tsdf::TsdfLayer>(session->map->tsdf().clone());
-  auto labels = std::make_shared<const gsm::LabelBlocks>(session->map->mainLabelBlocks());
-  const int64_t frames = session->map->frames();
-  const double copy_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - now).count();
   // Behind the inserts queued before it (waiting when the queue is full, like them).
-  database_queue_->pushWaiting([this, session, map, labels, frames, copy_ms] {
-    writeSavedMap(session, *map, *labels, frames, copy_ms);
-  });
+  database_queue_->pushWaiting(
+      [this, session, copy = copyMap(*session->map)] { writeSavedMap(session, copy); });
 }
 
 void ObjectDatabaseService::saveIdleMap(const std::shared_ptr<LiveSession>& session) {
-  bool ended = false;
-  {
-    std::lock_guard lock(session->mutex);
-    ended = session->state == v1::SESSION_STATE_ENDED;
-  }
-  if (ended || !session->map) {
+  // The stream is gone: the map is the database thread's now (flush frees it once ended).
+  if (!session->map) {
     session->map_save_pending = false;
     return;
   }
-  // The stream is gone: the map is the database thread's now.
-  const auto start = std::chrono::steady_clock::now();
-  const tsdf::TsdfLayer map = session->map->tsdf().clone();
-  const gsm::LabelBlocks labels = session->map->mainLabelBlocks();
-  const double copy_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-  writeSavedMap(session, map, labels, session->map->frames(), copy_ms);
+  writeSavedMap(session, copyMap(*session->map));
 }
 
 void ObjectDatabaseService::writeSavedMap(const std::shared_ptr<LiveSession>& session,
-                                          const tsdf::TsdfLayer& map,
-                                          const gsm::LabelBlocks& labels, int64_t frames,
-                                          double copy_ms) {
-  bool ended = false;
-  {
-    std::lock_guard lock(session->mutex);
-    ended = session->state == v1::SESSION_STATE_ENDED;
-  }
-  if (!ended) {
+                                          const MapCopy& copy) {
+  if (!session->ended()) {
     const auto start = std::chrono::steady_clock::now();
-    const Status saved = store_->putSavedMap(session->name, frames, map, labels);
+    const Status saved = store_->putSavedMap(session->name, copy.frames, *copy.map, *copy.labels);
     if (saved.ok()) {
-      session->map_saved_frames = frames;
+      session->map_saved_frames = copy.frames;
       logger("server")->info(
           "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms, written in "
           "{:.0f} ms)",
-          session->name, frames, map.numBlocks(), copy_ms,
+          session->name, copy.frames, copy.map->numBlocks(), copy.copy_ms,
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
               .count());
     } else {
@@ -1171,12 +1162,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
         auto saved_frames = store_->savedMapFrames(name);
         if (!saved_frames.ok()) return finishUnary(context, saved_frames.status());
         if (*saved_frames >= 0) {
-          return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
-                                          "session %s was not ended before the server stopped; "
-                                          "ending it from its map saved after %d frames failed "
-                                          "at this start (the server's log says why); the next "
-                                          "start tries again",
-                                          name, *saved_frames)));
+          return finishUnary(context, recoveryFailed(name, *saved_frames));
         }
         auto scene = store_->scene(name);
         if (!scene.ok()) return finishUnary(context, scene.status());
@@ -1211,12 +1197,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
   // second call queued behind the flush answers with the ended session's summary.
   auto job = [this, session, reactor, response] {
     Status status = absl::OkStatus();
-    bool ended = false;
-    {
-      std::lock_guard lock(session->mutex);
-      ended = session->state == v1::SESSION_STATE_ENDED;
-    }
-    if (!ended) status = flush(*session);
+    if (!session->ended()) status = flush(*session);
     if (status.ok()) {
       auto summary = summaryOf(*session);
       if (summary.ok()) {
@@ -1456,10 +1437,7 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
         }
         OBJDB_ASSIGN_OR_RETURN(const int64_t saved_frames, store_->savedMapFrames(name));
         if (saved_frames >= 0) {
-          return absl::FailedPreconditionError(absl::StrFormat(
-              "session %s has no stored map: ending it from its map saved after %d frames failed "
-              "at this start (the server's log says why); the next start tries again",
-              name, saved_frames));
+          return recoveryFailed(name, saved_frames);
         }
         return absl::FailedPreconditionError(absl::StrFormat(
             "session %s has no stored map (state %s): it was not ended before the server stopped "
@@ -1467,10 +1445,7 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
             name, storage::sessionStateName(it->state)));
       }
       // The session's own parameters decide its mesh; the server's its completion.
-      Params params = options_.params;
-      if (Status applied = applyParamsJson(it->params_json, &params); !applied.ok()) {
-        params = options_.params;
-      }
+      const Params params = storedSessionParams(*it);
       TriangleMesh mesh;
       if (completed) {
         // A deadline or a cancel stops the work between models.

@@ -43,6 +43,7 @@ class JobQueue;
 struct LiveSession;
 struct IngestStream;
 struct RawSegmentJob;
+struct MapCopy;
 
 struct ServiceOptions {
   Params params;                    // the server's parameters; sessions may override some
@@ -128,11 +129,16 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // last save (queued by the janitor).
   void saveIdleMap(const std::shared_ptr<LiveSession>& session);
   // Database thread: stores one save (skipped when the session has ended meanwhile).
-  void writeSavedMap(const std::shared_ptr<LiveSession>& session, const tsdf::TsdfLayer& map,
-                     const gsm::LabelBlocks& labels, int64_t frames, double copy_ms);
+  void writeSavedMap(const std::shared_ptr<LiveSession>& session, const MapCopy& copy);
   // Database thread, at start: a session a stopped server left not ended, with a saved map, gets
   // that map's segments inserted and its scene stored, and stays INTERRUPTED.
   Status recoverSession(const storage::SessionInfo& stored);
+  // The server's parameters with a stored session's own on top (the server's alone when they
+  // cannot be applied).
+  Params storedSessionParams(const storage::SessionInfo& stored) const;
+  // FAILED_PRECONDITION: ending the session from its map saved after `saved_frames` frames
+  // failed at this start (the saved map is still there).
+  static Status recoveryFailed(const std::string& name, int64_t saved_frames);
   // UNAVAILABLE while the session `name` is being ended from its saved map.
   Status checkNotRecovering(const std::string& name);
   // Queues the database insert of each segment (frame workers wait when the queue is full; they
