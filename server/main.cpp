@@ -54,6 +54,10 @@ options:
                           --auto-end-s is 0, once more a few seconds after its stream went), so
                           that a crash loses only the frames after the last save: the next
                           start ends the session from it; 0 = never (default 60)
+  --slow-reader-s N       end an Ingest stream whose client has read none of its events for N
+                          seconds while they wait (at 64 waiting acks and events its frames
+                          wait too), with RESOURCE_EXHAUSTED; the session stays open for
+                          EndSession, 1..86400 (default 60)
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 
@@ -161,6 +165,10 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       }
       cli->options.save_map_every =
           std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
+    } else if (arg == "--slow-reader-s") {
+      int seconds = 0;
+      if (!take_int(1, 24 * 3600, &seconds)) return false;
+      cli->options.slow_reader_timeout = std::chrono::seconds(seconds);
     } else if (arg == "--max-sessions") {
       if (!take_int(1, objdb::kMaxOpenSessions, &cli->options.max_open_sessions)) return false;
     } else if (arg == "--log-level") {

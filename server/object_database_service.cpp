@@ -239,9 +239,17 @@ struct IngestStream {
   bool finished = false;     // Finish was called (or is pending behind writes)
   std::deque<v1::IngestResponse> outbox;
   bool writing = false;
+  std::chrono::steady_clock::time_point last_write_done{};  // the client's last read (progress)
   std::optional<grpc::Status> finish_pending;
 
   void send(v1::IngestResponse response);
+  // Frame worker, before each frame: waits while `max_pending` events wait for the client. False
+  // when the stream was cancelled or finished meanwhile, or when the client read nothing for
+  // `timeout` (counted from the later of the wait's start and its last read): then the stream is
+  // finished with RESOURCE_EXHAUSTED (delivered after the event being written, whenever the
+  // client reads again), and the events behind that one and the frames not yet taken are dropped.
+  bool waitForReader(size_t max_pending, std::chrono::milliseconds timeout,
+                     const std::string& session);
   void finish(const grpc::Status& status);
   void resumeReading();
 };
@@ -255,57 +263,19 @@ class IngestReactor final : public grpc::ServerBidiReactor<v1::IngestRequest, v1
   }
 
   void OnReadDone(bool ok) override {
-    std::lock_guard lock(stream_->mutex);
-    if (stream_->finished) return;
-    if (!ok || stream_->cancelled) {
-      if (!stream_->header_seen) {  // no worker to end the call: end it here
-        stream_->finish(stream_->cancelled || context_->IsCancelled()
-                            ? grpc::Status(grpc::StatusCode::CANCELLED, "cancelled")
-                            : grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                                           "the stream ended before its SessionHeader"));
-      } else if (!ok && context_->IsCancelled()) {
-        stream_->cancelled = true;
-      } else if (!ok) {
-        stream_->input_ended = true;
-      }
-      stream_->changed.notify_all();
-      return;
-    }
-    if (!stream_->header_seen) {
-      if (!request_.has_header()) {
-        stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                                     "the first message of an Ingest stream must be a "
-                                     "SessionHeader; a frame came first"));
-        return;
-      }
-      // The frame worker opens the session (checks, store write): no waiting on gRPC's threads.
-      stream_->header_seen = true;
-      stream_->header = request_.header();
+    // The frame worker starts outside the stream's mutex: startWorker takes the service's mutex,
+    // which the janitor holds while it takes a session's, and EndSession takes a stream's mutex
+    // while it holds a session's (one lock order: service, session, stream).
+    if (takeRead(ok)) {
       service_->startWorker([service = service_, stream = stream_] { service->runStream(stream); });
-      StartRead(&request_);
-      return;
-    }
-    if (request_.has_header()) {
-      stream_->cancelled = true;
-      stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
-                                   "a second SessionHeader on the stream of session " +
-                                       stream_->header.session_name() +
-                                       "; one stream is one session"));
-      stream_->changed.notify_all();
-      return;
-    }
-    stream_->inbox.push_back(std::move(*request_.mutable_frame()));
-    stream_->changed.notify_all();
-    if (stream_->inbox.size() < service_->options_.frame_queue) {
-      StartRead(&request_);
-    } else {
-      stream_->reads_paused = true;  // the worker resumes reading when it takes a frame
     }
   }
 
   void OnWriteDone(bool ok) override {
     std::lock_guard lock(stream_->mutex);
     stream_->outbox.pop_front();
+    stream_->last_write_done = std::chrono::steady_clock::now();
+    stream_->changed.notify_all();  // a frame worker may wait for room (waitForReader)
     if (!ok) {  // the client is gone
       stream_->outbox.clear();
       stream_->cancelled = true;
@@ -343,6 +313,57 @@ class IngestReactor final : public grpc::ServerBidiReactor<v1::IngestRequest, v1
   void read() { StartRead(&request_); }
 
  private:
+  // The read's effect on the stream, under its mutex; true when the header came and the frame
+  // worker is to be started.
+  bool takeRead(bool ok) {
+    std::lock_guard lock(stream_->mutex);
+    if (stream_->finished) return false;
+    if (!ok || stream_->cancelled) {
+      if (!stream_->header_seen) {  // no worker to end the call: end it here
+        stream_->finish(stream_->cancelled || context_->IsCancelled()
+                            ? grpc::Status(grpc::StatusCode::CANCELLED, "cancelled")
+                            : grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                           "the stream ended before its SessionHeader"));
+      } else if (!ok && context_->IsCancelled()) {
+        stream_->cancelled = true;
+      } else if (!ok) {
+        stream_->input_ended = true;
+      }
+      stream_->changed.notify_all();
+      return false;
+    }
+    if (!stream_->header_seen) {
+      if (!request_.has_header()) {
+        stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                     "the first message of an Ingest stream must be a "
+                                     "SessionHeader; a frame came first"));
+        return false;
+      }
+      // The frame worker opens the session (checks, store write): no waiting on gRPC's threads.
+      stream_->header_seen = true;
+      stream_->header = request_.header();
+      StartRead(&request_);
+      return true;
+    }
+    if (request_.has_header()) {
+      stream_->cancelled = true;
+      stream_->finish(grpc::Status(grpc::StatusCode::FAILED_PRECONDITION,
+                                   "a second SessionHeader on the stream of session " +
+                                       stream_->header.session_name() +
+                                       "; one stream is one session"));
+      stream_->changed.notify_all();
+      return false;
+    }
+    stream_->inbox.push_back(std::move(*request_.mutable_frame()));
+    stream_->changed.notify_all();
+    if (stream_->inbox.size() < service_->options_.frame_queue) {
+      StartRead(&request_);
+    } else {
+      stream_->reads_paused = true;  // the worker resumes reading when it takes a frame
+    }
+    return false;
+  }
+
   ObjectDatabaseService* service_;
   grpc::CallbackServerContext* context_;
   std::shared_ptr<IngestStream> stream_;
@@ -357,6 +378,40 @@ void IngestStream::send(v1::IngestResponse response) {
     writing = true;
     reactor->StartWrite(&outbox.front());
   }
+}
+
+bool IngestStream::waitForReader(size_t max_pending, std::chrono::milliseconds timeout,
+                                 const std::string& session) {
+  std::unique_lock lock(mutex);
+  const auto room = [&] { return cancelled || finished || outbox.size() < max_pending; };
+  const auto waiting_since = std::chrono::steady_clock::now();
+  while (!room()) {
+    // The timeout runs from the later of the wait's start and the client's last read.
+    const auto give_up = std::max(waiting_since, last_write_done) + timeout;
+    if (changed.wait_until(lock, give_up, room)) break;
+    if (std::max(waiting_since, last_write_done) + timeout > std::chrono::steady_clock::now()) {
+      continue;  // the client read something meanwhile
+    }
+    const size_t pending = outbox.size();
+    // The front event is being written (gRPC holds it); the others are never sent, and the
+    // frames not yet taken are never fused.
+    if (writing && pending > 1) outbox.erase(outbox.begin() + 1, outbox.end());
+    inbox.clear();
+    cancelled = true;
+    const double seconds = std::chrono::duration<double>(timeout).count();
+    finish(grpc::Status(
+        grpc::StatusCode::RESOURCE_EXHAUSTED,
+        absl::StrFormat("the client read none of the %d events waiting on the Ingest stream of "
+                        "session %s for %g s; stream ended (the session stays open: "
+                        "EndSession stores it)",
+                        pending, session, seconds)));
+    changed.notify_all();
+    logger("server")->warn("session {}: the client has read none of its {} waiting events for "
+                           "{} s; ending its stream",
+                           session, pending, seconds);
+    return false;
+  }
+  return !cancelled && !finished;
 }
 
 void IngestStream::finish(const grpc::Status& status) {
@@ -750,6 +805,11 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
   LiveSession& session = **opened;
   bool ended_cleanly = false;
   while (true) {
+    // Backpressure from a client that does not read: no more frames until it does.
+    if (!stream->waitForReader(options_.max_pending_events, options_.slow_reader_timeout,
+                               session.name)) {
+      break;
+    }
     v1::Frame frame;
     {
       std::unique_lock lock(stream->mutex);
@@ -1388,7 +1448,12 @@ class SceneMeshReactor final : public grpc::ServerWriteReactor<v1::MeshChunk> {
     }
     writeNext();
   }
-  void OnDone() override { delete this; }
+  // start() and fail() run on a worker thread and may call Finish, after which gRPC may call
+  // OnDone on another thread before they have released the mutex: wait for it before deleting.
+  void OnDone() override {
+    { std::lock_guard lock(mutex_); }
+    delete this;
+  }
 
  private:
   void writeNext() {

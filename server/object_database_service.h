@@ -55,6 +55,12 @@ struct ServiceOptions {
   // An open session's map (TSDF + main labels) is saved this often, so that a crash loses only
   // the frames after the last save: the next start ends the session from it. 0 = never.
   std::chrono::milliseconds save_map_every{60 * 1000};
+  // Events (acks, segment and object events) waiting for a client that does not read its Ingest
+  // stream: at this many its frame worker stops taking frames (so the client's writes block); if
+  // the client then reads none of them for slow_reader_timeout, the stream ends with
+  // RESOURCE_EXHAUSTED and the session stays open, as after a broken stream.
+  size_t max_pending_events = 64;
+  std::chrono::milliseconds slow_reader_timeout{60 * 1000};
   size_t segment_queue = 64;        // segments waiting for the database before frame work waits
   int integration_threads = 2;      // TSDF integration threads per session
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size

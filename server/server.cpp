@@ -56,6 +56,15 @@ Status ServerOptions::validate() const {
         absl::StrFormat("save_map_every is %d ms, must be in [0, one day]",
                         static_cast<int64_t>(save_map_every.count())));
   }
+  if (max_pending_events < 1 || max_pending_events > 65536) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "max_pending_events is %d, must be in [1, 65536]", max_pending_events));
+  }
+  if (slow_reader_timeout.count() < 1 || slow_reader_timeout > std::chrono::hours(24)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("slow_reader_timeout is %d ms, must be in [1 ms, one day]",
+                        static_cast<int64_t>(slow_reader_timeout.count())));
+  }
   if (frame_queue < 1 || frame_queue > 1024) {
     return absl::InvalidArgumentError(
         absl::StrFormat("frame_queue is %d frames, must be in [1, 1024]", frame_queue));
@@ -83,6 +92,8 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   service_options.max_open_sessions = size_t(options.max_open_sessions);
   service_options.auto_end_after = options.auto_end_after;
   service_options.save_map_every = options.save_map_every;
+  service_options.max_pending_events = size_t(options.max_pending_events);
+  service_options.slow_reader_timeout = options.slow_reader_timeout;
   service_options.max_send_message_bytes = size_t(options.max_send_message_bytes);
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<server::ObjectDatabaseService> service,
                          server::ObjectDatabaseService::create(service_options, store.get()));

@@ -54,6 +54,12 @@ struct ServerOptions {
   Params params;
   // Frames buffered per Ingest stream before the server stops reading it (backpressure).
   int frame_queue = 8;
+  // A client that does not read its Ingest stream: at max_pending_events unread events (acks,
+  // segment and object events) the server stops taking its frames, so its writes block; after
+  // slow_reader_timeout with none of them read, the stream ends with RESOURCE_EXHAUSTED (the
+  // session stays open for EndSession, as after a broken stream).
+  int max_pending_events = 64;
+  std::chrono::milliseconds slow_reader_timeout{60 * 1000};
   // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a
   // room at 2 cm). One more Ingest is refused with RESOURCE_EXHAUSTED.
   int max_open_sessions = 16;

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cctype>
+#include <cstdlib>
 #include <chrono>
 #include <thread>
 
@@ -15,7 +17,14 @@
 namespace objdb::testing {
 
 void setDeadline(grpc::ClientContext* context) {
-  context->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  // OBJDB_DEADLINE_SCALE stretches it for instrumented builds (scripts/tsan.sh: ~10× slower).
+  static const double scale = [] {
+    const char* text = std::getenv("OBJDB_DEADLINE_SCALE");
+    const double s = text ? std::atof(text) : 1.0;
+    return s >= 1.0 ? std::min(s, 100.0) : 1.0;
+  }();
+  context->set_deadline(std::chrono::system_clock::now() +
+                        std::chrono::milliseconds(int64_t(120000 * scale)));
 }
 
 const Recording& twoBoxes() {

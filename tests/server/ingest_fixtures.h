@@ -17,7 +17,8 @@ namespace objdb::testing {
 
 inline constexpr double kMetresPerUnit = 0.001;  // the recording's depth unit
 
-// A deadline generous enough for any call of these tests (2 minutes).
+// A deadline generous enough for any call of these tests (2 minutes, times the environment's
+// OBJDB_DEADLINE_SCALE when that is above 1).
 void setDeadline(grpc::ClientContext* context);
 
 struct Recording {

@@ -907,6 +907,68 @@ TEST(ObjectDatabaseService, ConcurrentStreamsAndReadersAllSucceed) {
   }
 }
 
+TEST(ObjectDatabaseService, AClientThatStopsReadingHoldsItsFramesBackAndIsEndedAfterTheTimeout) {
+  // RELIABILITY R10 (b): a client writes frames but reads nothing. Once its transport window is
+  // full and max_pending_events wait, the server takes no more frames; after slow_reader_timeout
+  // the stream ends with RESOURCE_EXHAUSTED, and the session can still be ended.
+  ServerOptions options = loopbackOptions();
+  options.max_pending_events = 2;
+  options.slow_reader_timeout = std::chrono::milliseconds(1500);
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  // A small receive window that does not grow: the acks fill it after a few frames.
+  grpc::ChannelArguments arguments;
+  arguments.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  arguments.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 1024);
+  auto slow_stub = v1::ObjectDatabase::NewStub(grpc::CreateCustomChannel(
+      server->address(), grpc::InsecureChannelCredentials(), arguments));
+  constexpr size_t kFrames = 40;
+  const auto requests = session("slow", kFrames);
+  grpc::ClientContext context;
+  setDeadline(&context);
+  auto stream = slow_stub->Ingest(&context);
+  std::thread writer([&] {
+    for (const auto& r : requests) {
+      if (!stream->Write(r)) break;
+    }
+    stream->WritesDone();
+  });
+  // The stream is over once its session, having streamed, streams no more
+  // (GetStats.sessions_open).
+  auto sessionsOpen = [&] {
+    grpc::ClientContext stats_context;
+    setDeadline(&stats_context);
+    v1::GetStatsResponse stats;
+    return stub->GetStats(&stats_context, v1::GetStatsRequest(), &stats).ok()
+               ? int(stats.sessions_open())
+               : -1;
+  };
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(200);
+  bool started = false, over = false;
+  while (!over && std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const int open = sessionsOpen();
+    started = started || open > 0;
+    over = started && open == 0;
+  }
+  if (!over) context.TryCancel();  // lets the writer and the reads below end
+  size_t acks = 0;
+  v1::IngestResponse response;
+  while (stream->Read(&response)) acks += response.has_ack() ? 1 : 0;
+  writer.join();
+  const grpc::Status status = stream->Finish();
+  ASSERT_TRUE(over) << "the stream of a client that reads nothing never ended";
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+  EXPECT_NE(status.error_message().find("read none of the"), std::string::npos)
+      << status.error_message();
+  EXPECT_LT(acks, kFrames);
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "slow", &ended).ok());
+  EXPECT_GE(ended.summary().counters().frames_integrated(), acks);
+  EXPECT_LT(ended.summary().counters().frames_integrated(), kFrames);
+}
+
 TEST(ObjectDatabaseService, PageTokensAreCheckedAgainstTheirListing) {
   auto server = startOrDie(loopbackOptions());
   ASSERT_NE(server, nullptr);

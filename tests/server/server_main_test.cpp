@@ -90,6 +90,11 @@ TEST(ObjdbServerBinary, MissingOrMalformedValuesExitTwo) {
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_TRUE(contains(result.err, "got \"often\"")) << result.err;
 
+  result = runProcess({kServer, "--slow-reader-s", "0"});
+  EXPECT_EQ(result.exit_code, 2);
+  EXPECT_TRUE(contains(result.err, "--slow-reader-s must be an integer in [1, 86400]"))
+      << result.err;
+
   result = runProcess({kServer, "--allow-remote=yes"});
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_TRUE(contains(result.err, "--allow-remote takes no value")) << result.err;

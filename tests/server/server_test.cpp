@@ -137,6 +137,13 @@ TEST(ObjdbServer, StartRejectsInvalidOptions) {
   StatusOr<std::unique_ptr<ObjdbServer>> server = ObjdbServer::start(options);
   ASSERT_FALSE(server.ok());
   EXPECT_EQ(server.status().code(), absl::StatusCode::kInvalidArgument);
+  // The slow-reader bounds, each named.
+  options = loopbackOptions();
+  options.max_pending_events = 0;
+  EXPECT_NE(options.validate().message().find("max_pending_events is 0"), std::string::npos);
+  options = loopbackOptions();
+  options.slow_reader_timeout = std::chrono::milliseconds(0);
+  EXPECT_NE(options.validate().message().find("slow_reader_timeout is 0 ms"), std::string::npos);
 }
 
 TEST(ObjdbServer, MessageAboveTheReceiveLimitIsResourceExhaustedAndServerCarriesOn) {
@@ -163,6 +170,8 @@ TEST(ServerOptions, DefaultsAreValidAndMatchTheDocumentation) {
   EXPECT_EQ(options.max_send_message_bytes, 16 * 1024 * 1024);
   EXPECT_EQ(options.drain_deadline, std::chrono::seconds(10));
   EXPECT_EQ(options.save_map_every, std::chrono::seconds(60));
+  EXPECT_EQ(options.max_pending_events, 64);
+  EXPECT_EQ(options.slow_reader_timeout, std::chrono::seconds(60));
 }
 
 TEST(ServerOptions, ParsesLoopbackAddresses) {

@@ -1,0 +1,111 @@
+#!/usr/bin/env python3
+"""Sorts the ThreadSanitizer reports of scripts/tsan.sh and exits 1 if any is left for us.
+
+Only our code is instrumented; Debian's gRPC, protobuf, abseil, GDAL and libgomp are not, so TSan
+cannot see the synchronisation inside them and reports races that are not there. Each access of a
+data race is attributed to the innermost frame past the sanitizer and the C++ standard headers:
+ours (this tree, generated protobuf code included unless only gRPC runs it), gRPC's (its
+libraries, abseil, protobuf, grpcpp headers) or another library's. Counted, not shown:
+  third-party - neither access is ours (a lock-order cycle: no lock of it taken by our code);
+  openmp      - an access inside a PCL OpenMP region (`_omp_fn`, or on a thread libgomp made):
+                libgomp's barrier is invisible;
+  grpc        - ours against gRPC's (a message or buffer handed over through gRPC), or two of
+                ours both under gRPC's callbacks where one creates or destroys the object (the
+                reactor made by the Ingest handler, then called back on another thread): gRPC's
+                completion-queue handoff is invisible.
+Everything else is printed whole: races between our accesses (also through PCL or Eigen
+headers), lock-order cycles through our locks, and every other kind of report that has a frame of
+ours (mutex misuse, use after free, leaked threads).
+usage: tsan_triage.py ROOT LOG"""
+import collections
+import re
+import sys
+
+ACCESS = re.compile(
+    r"\n  ((?:Previous )?(?:[Aa]tomic )?(?:[Ww]rite|[Rr]ead) of size.*?)(?=\n\n|$)", re.S)
+ACQUIRE = re.compile(r"\n  (Mutex \S+ acquired here.*?)(?=\n\n|$)", re.S)
+FRAME = re.compile(r"#\d+ (.+?) (\S+) \((\S+?)\+")
+CREATING = re.compile(r"(?:\S+::)?(\w+)::~?\1\(|operator new|operator delete|^free$|^malloc$|"
+                      r"ObjectDatabaseService::Ingest\(")
+
+
+def frames(block):
+    return [(m.group(1), m.group(2), m.group(3)) for m in FRAME.finditer(block)]
+
+
+GRPC = re.compile(r"libgrpc|libgpr|libabsl|libprotobuf|libupb|libaddress_sorting|"
+                  r"/usr/include/grpcpp/|/usr/include/grpc/|/usr/include/google/protobuf/|"
+                  r"/usr/include/absl/")
+
+
+def owner(block, root):
+    """'ours', 'grpc' or 'other' for the innermost frame past the sanitizer and std headers."""
+    for _, path, module in frames(block):
+        if "libsanitizer" in path or path.startswith("/usr/include/c++/") or \
+                path.startswith("/usr/include/x86_64-linux-gnu/c++/"):
+            continue
+        if path.startswith(root):
+            # Generated protobuf code run by gRPC alone (parsing, serialising, destroying a
+            # message it owns) is gRPC's handling of the message.
+            if "/proto/gen/" in path and not any(
+                    p.startswith(root) and "/proto/gen/" not in p for _, p, _ in frames(block)):
+                return "grpc"
+            return "ours"
+        return "grpc" if GRPC.search(path) or GRPC.search(module) else "other"
+    return "other"
+
+
+def on_openmp_thread(access, report):
+    """The access ran on a thread libgomp created (its stack may not be restorable)."""
+    thread = re.search(r"by thread (T\d+)", access)
+    if not thread:
+        return False
+    created = re.search(r"\n  Thread " + thread.group(1) + r" .*? created by .*?(?=\n\n|$)", report, re.S)
+    return bool(created) and "libgomp" in created.group(0)
+
+
+def under_grpc(block):
+    return "grpc::internal::" in block or "libgrpc" in block
+
+
+def kind(report, root):
+    title = report.split("\n", 1)[0]
+    if "lock-order-inversion" in title:
+        taken = ACQUIRE.findall(report)
+        return "ours" if any(owner(b, root) == "ours" for b in taken) else "third-party"
+    if "data race" not in title:
+        return "ours" if any(p.startswith(root) for _, p, _ in frames(report)) else "third-party"
+    accesses = ACCESS.findall(report)[:2]
+    owners = [owner(a, root) for a in accesses]
+    if "ours" not in owners:
+        return "third-party"
+    if any("_omp_fn" in a or on_openmp_thread(a, report) for a in accesses):
+        return "openmp"
+    if "grpc" in owners:
+        return "grpc"
+    if len(accesses) == 2 and owners == ["ours", "ours"] and all(under_grpc(a) for a in accesses) \
+            and any(CREATING.search(f) for a in accesses for f, _, _ in frames(a)):
+        return "grpc"
+    return "ours"
+
+
+def main():
+    root, log = sys.argv[1], open(sys.argv[2], errors="replace").read()
+    reports = [r.split("SUMMARY:")[0] for r in log.split("WARNING: ThreadSanitizer:")[1:]]
+    kinds = collections.Counter()
+    left = []
+    for report in reports:
+        k = kind(report, root)
+        if k == "ours":
+            left.append(report)
+        else:
+            kinds[k] += 1
+    excused = "".join(f"{n} {k}, " for k, n in sorted(kinds.items()))
+    print(f"tsan_triage: {len(reports)} reports: {excused}{len(left)} ours")
+    for report in left:
+        print("WARNING: ThreadSanitizer:" + report)
+    return 1 if left else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
