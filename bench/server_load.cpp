@@ -470,7 +470,7 @@ int main(int argc, char** argv) {
     differing += same ? 0 : 1;
     std::printf("%-28s %10zu %10zu    %s\n", name.c_str(), a.size(), b.size(), same ? "yes" : "NO");
   }
-  std::printf("\nsessions whose objects differ between the runs (points, voxels, poses, merges): %zu of %d\n",
+  std::printf("\nsessions whose objects differ between the runs (points, voxels, poses, merges, cloud hash): %zu of %d\n",
               differing, streams);
   // Exit 1 on any R8 failure: a stream or ack problem, UNKNOWN/INTERNAL/UNAVAILABLE answers, a
   // missing or damaged backup, or objects that differ from the sequential run.

@@ -10,9 +10,10 @@ libraries, abseil, protobuf, grpcpp headers) or another library's. Counted, not 
   openmp      - an access inside a PCL OpenMP region (`_omp_fn`, or on a thread libgomp made):
                 libgomp's barrier is invisible;
   grpc        - ours against gRPC's (a message or buffer handed over through gRPC), or two of
-                ours both under gRPC's callbacks where one creates or destroys the object (the
-                reactor made by the Ingest handler, then called back on another thread): gRPC's
-                completion-queue handoff is invisible.
+                ours both under gRPC's callbacks where one creates or destroys the object (a
+                reactor made by a handler, then called back on another thread) or where one
+                access's stack is lost on a gRPC thread: gRPC's completion-queue handoff is
+                invisible.
 Everything else is printed whole: races between our accesses (also through PCL or Eigen
 headers), lock-order cycles through our locks, and every other kind of report that has a frame of
 ours (mutex misuse, use after free, leaked threads).
@@ -55,13 +56,23 @@ def owner(block, root):
     return "other"
 
 
-def on_openmp_thread(access, report):
-    """The access ran on a thread libgomp created (its stack may not be restorable)."""
+def created_by(access, report, library):
+    """The access ran on a thread that `library` created (its stack may not be restorable)."""
     thread = re.search(r"by thread (T\d+)", access)
     if not thread:
         return False
-    created = re.search(r"\n  Thread " + thread.group(1) + r" .*? created by .*?(?=\n\n|$)", report, re.S)
-    return bool(created) and "libgomp" in created.group(0)
+    created = re.search(r"\n  Thread " + thread.group(1) + r" .*? created by .*?(?=\n\n|$)",
+                        report, re.S)
+    return bool(created) and library in created.group(0)
+
+
+def on_openmp_thread(access, report):
+    return created_by(access, report, "libgomp")
+
+
+def lost_on_grpc_thread(access, report):
+    """An access whose stack TSan lost, on one of gRPC's threads."""
+    return "[failed to restore the stack]" in access and created_by(access, report, "grpc_core::Thread")
 
 
 def under_grpc(block):
@@ -83,9 +94,10 @@ def kind(report, root):
         return "openmp"
     if "grpc" in owners:
         return "grpc"
-    if len(accesses) == 2 and owners == ["ours", "ours"] and all(under_grpc(a) for a in accesses) \
-            and any(CREATING.search(f) for a in accesses for f, _, _ in frames(a)):
-        return "grpc"
+    if len(accesses) == 2 and all(under_grpc(a) or lost_on_grpc_thread(a, report) for a in accesses):
+        creating = any(CREATING.search(f) for a in accesses for f, _, _ in frames(a))
+        if creating or any(lost_on_grpc_thread(a, report) for a in accesses):
+            return "grpc"
     return "ours"
 
 
