@@ -11,14 +11,16 @@ libraries, abseil, protobuf, grpcpp headers) or another library's. Counted, not 
                 libgomp's barrier is invisible;
   grpc        - ours against gRPC's (a message or buffer handed over through gRPC), or two of
                 ours both under gRPC's callbacks where one creates or destroys the object (a
-                reactor made by a handler, then called back on another thread) or where one
-                access's stack is lost on a gRPC thread: gRPC's completion-queue handoff is
+                constructor, destructor, new or delete before the first frame of ours, or the
+                lost stack of the gRPC thread that allocated it: a reactor made by a handler,
+                then called back on another thread): gRPC's completion-queue handoff is
                 invisible.
-Everything else is printed whole: races between our accesses (also through PCL or Eigen
-headers), lock-order cycles through our locks, and every other kind of report that has a frame of
+Everything else is printed whole: races between our accesses (frames in the C++, Eigen, PCL and
+Boost headers count as their caller's), lock-order cycles through our locks, and every other kind of report that has a frame of
 ours (mutex misuse, use after free, leaked threads).
 usage: tsan_triage.py ROOT LOG"""
 import collections
+import os
 import re
 import sys
 
@@ -39,11 +41,14 @@ GRPC = re.compile(r"libgrpc|libgpr|libabsl|libprotobuf|libupb|libaddress_sorting
                   r"/usr/include/absl/")
 
 
+# Header-only code compiled into our binaries (instrumented): the caller decides.
+HEADER_ONLY = re.compile(r"/usr/include/(c\+\+/|x86_64-linux-gnu/c\+\+/|eigen3/|pcl-[\d.]+/|boost/)")
+
+
 def owner(block, root):
     """'ours', 'grpc' or 'other' for the innermost frame past the sanitizer and std headers."""
     for _, path, module in frames(block):
-        if "libsanitizer" in path or path.startswith("/usr/include/c++/") or \
-                path.startswith("/usr/include/x86_64-linux-gnu/c++/"):
+        if "libsanitizer" in path or HEADER_ONLY.match(path):
             continue
         if path.startswith(root):
             # Generated protobuf code run by gRPC alone (parsing, serialising, destroying a
@@ -71,8 +76,28 @@ def on_openmp_thread(access, report):
 
 
 def lost_on_grpc_thread(access, report):
-    """An access whose stack TSan lost, on one of gRPC's threads."""
-    return "[failed to restore the stack]" in access and created_by(access, report, "grpc_core::Thread")
+    """An access whose stack TSan lost, on the gRPC thread that allocated the location (a handler
+    creating its reactor)."""
+    thread = re.search(r"by thread (T\d+)", access)
+    return ("[failed to restore the stack]" in access and bool(thread) and
+            thread.group(1) == allocated_by(report) and
+            created_by(access, report, "grpc_core::Thread"))
+
+
+def creates_or_destroys(block, root):
+    """A constructor, destructor, new, delete or the Ingest handler among the innermost frames,
+    up to and including the first frame of ours."""
+    for function, path, _ in frames(block):
+        if CREATING.search(function):
+            return True
+        if path.startswith(root):
+            return False
+    return False
+
+
+def allocated_by(report):
+    m = re.search(r"\n  Location is heap block .*? allocated by (?:thread (T\d+)|main thread)", report)
+    return (m.group(1) or "main") if m else None
 
 
 def under_grpc(block):
@@ -87,6 +112,8 @@ def kind(report, root):
     if "data race" not in title:
         return "ours" if any(p.startswith(root) for _, p, _ in frames(report)) else "third-party"
     accesses = ACCESS.findall(report)[:2]
+    if len(accesses) < 2:
+        return "ours"  # not understood: shown
     owners = [owner(a, root) for a in accesses]
     if "ours" not in owners:
         return "third-party"
@@ -95,14 +122,14 @@ def kind(report, root):
     if "grpc" in owners:
         return "grpc"
     if len(accesses) == 2 and all(under_grpc(a) or lost_on_grpc_thread(a, report) for a in accesses):
-        creating = any(CREATING.search(f) for a in accesses for f, _, _ in frames(a))
-        if creating or any(lost_on_grpc_thread(a, report) for a in accesses):
+        if any(creates_or_destroys(a, root) or lost_on_grpc_thread(a, report) for a in accesses):
             return "grpc"
     return "ours"
 
 
 def main():
-    root, log = sys.argv[1], open(sys.argv[2], errors="replace").read()
+    root = os.path.realpath(sys.argv[1]).rstrip("/") + "/"
+    log = open(sys.argv[2], errors="replace").read()
     reports = [r.split("SUMMARY:")[0] for r in log.split("WARNING: ThreadSanitizer:")[1:]]
     kinds = collections.Counter()
     left = []

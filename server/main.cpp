@@ -56,8 +56,8 @@ options:
                           start ends the session from it; 0 = never (default 60)
   --slow-reader-s N       end an Ingest stream whose client has read none of its events for N
                           seconds while they wait (at 64 waiting acks and events its frames
-                          wait too), with RESOURCE_EXHAUSTED; the session stays open for
-                          EndSession, 1..86400 (default 60)
+                          wait too), with RESOURCE_EXHAUSTED; the session is kept
+                          (interrupted) for EndSession, 1..86400 (default 60)
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 

@@ -402,8 +402,8 @@ bool IngestStream::waitForReader(size_t max_pending, std::chrono::milliseconds t
     finish(grpc::Status(
         grpc::StatusCode::RESOURCE_EXHAUSTED,
         absl::StrFormat("the client read none of the %d events waiting on the Ingest stream of "
-                        "session %s for %g s; stream ended (the session stays open: "
-                        "EndSession stores it)",
+                        "session %s for %g s; stream ended (the session is kept, "
+                        "interrupted: EndSession stores it)",
                         pending, session, seconds)));
     changed.notify_all();
     logger("server")->warn("session {}: the client has read none of its {} waiting events for "

@@ -58,7 +58,7 @@ struct ServiceOptions {
   // Events (acks, segment and object events) waiting for a client that does not read its Ingest
   // stream: at this many its frame worker stops taking frames (so the client's writes block); if
   // the client then reads none of them for slow_reader_timeout, the stream ends with
-  // RESOURCE_EXHAUSTED and the session stays open, as after a broken stream.
+  // RESOURCE_EXHAUSTED and the session is kept (INTERRUPTED), as after a broken stream.
   size_t max_pending_events = 64;
   std::chrono::milliseconds slow_reader_timeout{60 * 1000};
   size_t segment_queue = 64;        // segments waiting for the database before frame work waits

@@ -57,7 +57,7 @@ struct ServerOptions {
   // A client that does not read its Ingest stream: at max_pending_events unread events (acks,
   // segment and object events) the server stops taking its frames, so its writes block; after
   // slow_reader_timeout with none of them read, the stream ends with RESOURCE_EXHAUSTED (the
-  // session stays open for EndSession, as after a broken stream).
+  // session is kept, INTERRUPTED, for EndSession, as after a broken stream).
   int max_pending_events = 64;
   std::chrono::milliseconds slow_reader_timeout{60 * 1000};
   // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a

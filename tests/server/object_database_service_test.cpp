@@ -923,7 +923,8 @@ TEST(ObjectDatabaseService, ConcurrentStreamsAndReadersAllSucceed) {
 TEST(ObjectDatabaseService, AClientThatStopsReadingHoldsItsFramesBackAndIsEndedAfterTheTimeout) {
   // RELIABILITY R10 (b): a client writes frames but reads nothing. Once its transport window is
   // full and max_pending_events wait, the server takes no more frames; after slow_reader_timeout
-  // the stream ends with RESOURCE_EXHAUSTED, and the session can still be ended.
+  // the stream ends with RESOURCE_EXHAUSTED, and the session can still be ended. (The 1 KiB
+  // window holds the acks of about 35 frames.)
   ServerOptions options = loopbackOptions();
   options.max_pending_events = 2;
   options.slow_reader_timeout = std::chrono::milliseconds(1500);
@@ -936,8 +937,15 @@ TEST(ObjectDatabaseService, AClientThatStopsReadingHoldsItsFramesBackAndIsEndedA
   arguments.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 1024);
   auto slow_stub = v1::ObjectDatabase::NewStub(grpc::CreateCustomChannel(
       server->address(), grpc::InsecureChannelCredentials(), arguments));
-  constexpr size_t kFrames = 40;
-  const auto requests = session("slow", kFrames);
+  // 100 frames: the 40 recorded ones, then again from the start (indices and times go on).
+  constexpr size_t kFrames = 100;
+  const Recording& r = twoBoxes();
+  std::vector<v1::IngestRequest> requests = {header("slow", r.intrinsics)};
+  for (size_t k = 0; k < kFrames; ++k) {
+    requests.push_back(frame(r, k % r.depth.size()));
+    requests.back().mutable_frame()->set_index(k);
+    requests.back().mutable_frame()->set_timestamp_s(double(k) / 30.0);
+  }
   grpc::ClientContext context;
   setDeadline(&context);
   auto stream = slow_stub->Ingest(&context);
