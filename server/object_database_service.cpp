@@ -384,14 +384,12 @@ bool IngestStream::waitForReader(size_t max_pending, std::chrono::milliseconds t
                                  const std::string& session) {
   std::unique_lock lock(mutex);
   const auto room = [&] { return cancelled || finished || outbox.size() < max_pending; };
+  // The timeout runs from the later of the wait's start and the client's last read.
   const auto waiting_since = std::chrono::steady_clock::now();
+  const auto give_up = [&] { return std::max(waiting_since, last_write_done) + timeout; };
   while (!room()) {
-    // The timeout runs from the later of the wait's start and the client's last read.
-    const auto give_up = std::max(waiting_since, last_write_done) + timeout;
-    if (changed.wait_until(lock, give_up, room)) break;
-    if (std::max(waiting_since, last_write_done) + timeout > std::chrono::steady_clock::now()) {
-      continue;  // the client read something meanwhile
-    }
+    if (changed.wait_until(lock, give_up(), room)) break;
+    if (give_up() > std::chrono::steady_clock::now()) continue;  // the client read meanwhile
     const size_t pending = outbox.size();
     // The front event is being written (gRPC holds it); the others are never sent, and the
     // frames not yet taken are never fused.
