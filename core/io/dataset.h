@@ -1,7 +1,10 @@
-// A posed RGB-D sequence on disk, read frame by frame. Two layouts are supported:
+// A posed RGB-D sequence on disk, read frame by frame. Three layouts are supported:
 //  - objdb's own (objdb_dataset.h): intrinsics.json, poses.txt, depth/, color/, instances/,
 //    objects.json;
-//  - TUM RGB-D (tum_dataset.h): rgb.txt, depth.txt, groundtruth.txt, depth factor 5000.
+//  - TUM RGB-D (tum_dataset.h): rgb.txt, depth.txt, groundtruth.txt, depth factor 5000, and
+//    optionally instances/ and objects.json as in the objdb layout;
+//  - 7-Scenes / 3DMatch / tsdf-fusion (seven_scenes_dataset.h): camera-intrinsics.txt,
+//    frame-NNNNNN.{depth.png,pose.txt,color.png|jpg}.
 // openDataset() tells them apart. Frames load lazily, so a sequence never sits in memory whole.
 #pragma once
 
@@ -17,7 +20,7 @@ namespace objdb::io {
 class Dataset {
  public:
   virtual ~Dataset() = default;
-  virtual std::string layout() const = 0;  // "objdb" or "tum"
+  virtual std::string layout() const = 0;  // "objdb", "tum" or "7scenes"
   virtual const std::filesystem::path& root() const = 0;
   virtual const Intrinsics& intrinsics() const = 0;
   virtual double metresPerDepthUnit() const = 0;
@@ -29,13 +32,15 @@ class Dataset {
 };
 
 struct DatasetOptions {
-  // Overrides intrinsics.json (required for a TUM folder without one).
+  // Overrides intrinsics.json / camera-intrinsics.txt (required for a TUM or 7-Scenes folder
+  // without one).
   std::optional<Intrinsics> intrinsics;
   // TUM association: a depth frame takes the pose / colour image closest in time, if within this.
   double max_time_difference_s = 0.02;
 };
 
-// Detects the layout of `root` (objdb: poses.txt; TUM: depth.txt) and opens it.
+// Detects the layout of `root` (objdb: poses.txt; else TUM: depth.txt; else 7-Scenes:
+// camera-intrinsics.txt or frame-NNNNNN.pose.txt files) and opens it.
 StatusOr<std::unique_ptr<Dataset>> openDataset(const std::filesystem::path& root,
                                                const DatasetOptions& options = {});
 

@@ -7,6 +7,7 @@
 //   instances/NNNNNN.png optional 16-bit ground-truth instance id per pixel, 0 = none
 //   objects.json      optional ground truth: {"objects": [{"id","category","mesh","structure",
 //                     "T_world_object": {"t": [x,y,z], "q": [qx,qy,qz,qw]}}], ...}
+//                     (instances/ and objects.json are read by ground_truth.h, shared with TUM)
 // See docs/dataset-format.md.
 #pragma once
 
@@ -16,25 +17,9 @@
 #include <vector>
 
 #include "core/io/dataset.h"
+#include "core/io/ground_truth.h"
 
 namespace objdb::io {
-
-// One ground-truth object instance of a synthetic (or annotated) session.
-struct GroundTruthObject {
-  int id = 0;                  // instance id as in instances/*.png (1..65535)
-  std::string category;        // object kind ("round_chair", "floor", "wall", ...)
-  std::string mesh;            // mesh name or file the instance was built from
-  Transform T_world_object = Transform::Identity();
-  bool is_structure = false;   // floor/walls: background for object-level evaluation
-  bool operator==(const GroundTruthObject& o) const {
-    return id == o.id && category == o.category && mesh == o.mesh &&
-           T_world_object.isApprox(o.T_world_object, 1e-9) && is_structure == o.is_structure;
-  }
-};
-
-StatusOr<std::vector<GroundTruthObject>> readObjectsJson(const std::filesystem::path& path);
-Status writeObjectsJson(const std::filesystem::path& path,
-                        const std::vector<GroundTruthObject>& objects);
 
 StatusOr<Intrinsics> readIntrinsicsJson(const std::filesystem::path& path,
                                         double* metres_per_unit);

@@ -189,6 +189,12 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
     OBJDB_ASSIGN_OR_RETURN(rgb_list, readTumList(rgb_path));
   }
 
+  dataset->has_instances_ = fs::is_directory(root / "instances", ec);
+  const fs::path objects_path = root / "objects.json";
+  if (fs::exists(objects_path, ec)) {
+    OBJDB_ASSIGN_OR_RETURN(dataset->objects_, readObjectsJson(objects_path));
+  }
+
   const auto pose_times = sortedTimes(poses);
   const auto rgb_times = sortedTimes(rgb_list);
   const double max_dt = options.max_time_difference_s;
@@ -214,8 +220,9 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
   }
   logger("io")->debug(
       "opened TUM dataset {}: {} frames ({} depth images without a pose within {} s skipped, {} "
-      "frames without colour), {}",
+      "frames without colour){}, {} ground-truth objects, {}",
       root.string(), dataset->frames_.size(), dataset->frames_without_pose_, max_dt, without_color,
+      dataset->has_instances_ ? ", instances" : "", dataset->objects_.size(),
       toString(dataset->intrinsics_));
   return dataset;
 }
@@ -241,6 +248,11 @@ StatusOr<Frame> TumDataset::loadFrame(size_t i) const {
     OBJDB_RETURN_IF_ERROR(intrinsics_.checkImageSize(
         color.width, color.height, absl::StrCat("colour image ", color_path.string())));
     frame.color = std::move(color);
+  }
+  if (has_instances_) {
+    const fs::path name = depth_path.stem().string() + ".png";
+    OBJDB_ASSIGN_OR_RETURN(frame.instances,
+                           readInstanceImage(root_ / "instances" / name, intrinsics_));
   }
   return frame;
 }

@@ -5,6 +5,9 @@
 // DatasetOptions. Each depth frame is associated with the ground-truth pose and the colour image
 // nearest in time (within DatasetOptions::max_time_difference_s); depth frames without a pose
 // are skipped and counted (framesWithoutPose()).
+// Ground-truth variant: an instances/ folder with one 16-bit instance-id PNG per depth image (same
+// file name: instances/NNNNNN.png for depth/NNNNNN.png) and an objects.json, both exactly as in
+// the objdb layout (ground_truth.h).
 #pragma once
 
 #include <filesystem>
@@ -13,6 +16,7 @@
 #include <vector>
 
 #include "core/io/dataset.h"
+#include "core/io/ground_truth.h"
 
 namespace objdb::io {
 
@@ -40,9 +44,11 @@ class TumDataset : public Dataset {
   double metresPerDepthUnit() const override { return 1.0 / depth_factor_; }
   size_t size() const override { return frames_.size(); }
   bool hasColor() const override { return has_color_; }
-  bool hasInstances() const override { return false; }
+  bool hasInstances() const override { return has_instances_; }
   StatusOr<Frame> loadFrame(size_t i) const override;
   size_t framesWithoutPose() const { return frames_without_pose_; }
+  // Ground-truth objects (empty when objects.json is absent).
+  const std::vector<GroundTruthObject>& objects() const { return objects_; }
 
  private:
   struct Associated {
@@ -55,6 +61,8 @@ class TumDataset : public Dataset {
   double depth_factor_ = kTumDepthFactor;
   std::vector<Associated> frames_;
   bool has_color_ = false;
+  bool has_instances_ = false;  // instances/ exists: every frame must have its image
+  std::vector<GroundTruthObject> objects_;
   size_t frames_without_pose_ = 0;
 };
 

@@ -176,7 +176,7 @@ TEST(ObjdbDatasetWriter, UnfinishedWriterLeavesNoPosesFile) {
   EXPECT_FALSE(fs::exists(dir / "poses.txt"));
   const auto dataset = openDataset(dir.path());
   ASSERT_FALSE(dataset.ok());
-  EXPECT_THAT(std::string(dataset.status().message()), HasSubstr("neither"));
+  EXPECT_THAT(std::string(dataset.status().message()), HasSubstr("none of the known layouts"));
 }
 
 TEST(ObjdbDatasetWriter, RejectsBadFrames) {

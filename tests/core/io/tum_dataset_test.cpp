@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <filesystem>
+#include <string>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -176,6 +178,121 @@ TEST(TumDataset, MissingDepthImageIsNamedWhenLoaded) {
   ASSERT_FALSE(frame.ok());
   EXPECT_EQ(frame.status().code(), absl::StatusCode::kNotFound);
   EXPECT_THAT(std::string(frame.status().message()), HasSubstr("depth/100.033000.png"));
+}
+
+// The TUM sample plus ground truth: instances/<depth stem>.png for each of its four depth
+// images, holding 100 k + 10 v + u (k = position in depth.txt), and an objects.json.
+const char* const kSampleDepthStems[4] = {"100.000000", "100.033000", "100.200000", "100.400000"};
+
+InstanceImage sampleInstances(int k) {
+  InstanceImage ids(8, 6);
+  for (int v = 0; v < 6; ++v) {
+    for (int u = 0; u < 8; ++u) ids.at(u, v) = uint16_t(100 * k + 10 * v + u);
+  }
+  ids.at(0, 0) = 0;      // no object
+  ids.at(7, 5) = 65535;  // the largest id
+  return ids;
+}
+
+std::vector<GroundTruthObject> sampleObjects() {
+  GroundTruthObject chair;
+  chair.id = 12;
+  chair.category = "chair";
+  chair.mesh = "meshes/chair.ply";
+  chair.T_world_object = poseFromXyzYaw(Eigen::Vector3d(1.0, -2.0, 0.0), 0.5);
+  GroundTruthObject floor;
+  floor.id = 65535;
+  floor.category = "floor";
+  floor.is_structure = true;
+  return {chair, floor};
+}
+
+void writeGroundTruthSample(const TempDir& dir) {
+  fs::copy(kSample, dir.path(), fs::copy_options::recursive);
+  fs::create_directories(dir / "instances");
+  for (int k = 0; k < 4; ++k) {
+    ASSERT_TRUE(writeUint16Png(dir / "instances" / (std::string(kSampleDepthStems[k]) + ".png"),
+                               sampleInstances(k))
+                    .ok());
+  }
+  ASSERT_TRUE(writeObjectsJson(dir / "objects.json", sampleObjects()).ok());
+}
+
+TEST(TumDataset, InstancesFolderGivesEachFrameItsGroundTruthImage) {
+  TempDir dir;
+  ASSERT_NO_FATAL_FAILURE(writeGroundTruthSample(dir));
+  const auto opened = openDataset(dir.path());
+  ASSERT_TRUE(opened.ok()) << opened.status();
+  ASSERT_EQ((*opened)->layout(), "tum");
+  const auto& dataset = dynamic_cast<const TumDataset&>(**opened);
+  EXPECT_TRUE(dataset.hasInstances());
+  EXPECT_EQ(dataset.objects(), sampleObjects());
+  ASSERT_EQ(dataset.size(), 3u);
+  // Frames 0, 1, 2 are depth images 0, 1, 3 (the one at 100.2 s has no pose).
+  const int depth_file[3] = {0, 1, 3};
+  for (size_t i = 0; i < 3; ++i) {
+    SCOPED_TRACE(i);
+    const auto frame = dataset.loadFrame(i);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    ASSERT_TRUE(frame->instances.has_value());
+    EXPECT_EQ(*frame->instances, sampleInstances(depth_file[i]));
+    EXPECT_EQ(frame->instances->at(3, 2), 100 * depth_file[i] + 23);
+    EXPECT_EQ(frame->instances->at(7, 5), 65535);
+    EXPECT_FLOAT_EQ(frame->depth.at(0, 0), 1.0f + 0.05f * float(depth_file[i]));
+  }
+}
+
+TEST(TumDataset, WithoutGroundTruthFramesHaveNoInstances) {
+  const auto dataset = TumDataset::open(kSample);
+  ASSERT_TRUE(dataset.ok()) << dataset.status();
+  EXPECT_FALSE((*dataset)->hasInstances());
+  EXPECT_TRUE((*dataset)->objects().empty());
+  const auto frame = (*dataset)->loadFrame(0);
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  EXPECT_FALSE(frame->instances.has_value());
+}
+
+TEST(TumDataset, WrongSizeInstancesImageIsNamed) {
+  TempDir dir;
+  ASSERT_NO_FATAL_FAILURE(writeGroundTruthSample(dir));
+  const fs::path bad = dir / "instances" / "100.400000.png";
+  ASSERT_TRUE(writeUint16Png(bad, InstanceImage(5, 4, 3)).ok());
+  const auto dataset = TumDataset::open(dir.path());
+  ASSERT_TRUE(dataset.ok()) << dataset.status();
+  EXPECT_TRUE((*dataset)->loadFrame(1).ok());
+  const auto frame = (*dataset)->loadFrame(2);
+  ASSERT_FALSE(frame.ok());
+  EXPECT_EQ(frame.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(frame.status().message()),
+              HasSubstr("instances image " + bad.string() + " is 5x4 but intrinsics are for 8x6"));
+}
+
+TEST(TumDataset, MissingInstancesImageIsNamed) {
+  TempDir dir;
+  ASSERT_NO_FATAL_FAILURE(writeGroundTruthSample(dir));
+  const fs::path missing = dir / "instances" / "100.033000.png";
+  ASSERT_TRUE(fs::remove(missing));
+  const auto dataset = TumDataset::open(dir.path());
+  ASSERT_TRUE(dataset.ok()) << dataset.status();
+  EXPECT_TRUE((*dataset)->loadFrame(0).ok());
+  const auto frame = (*dataset)->loadFrame(1);
+  ASSERT_FALSE(frame.ok());
+  EXPECT_EQ(frame.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(std::string(frame.status().message()), HasSubstr(missing.string()));
+}
+
+TEST(TumDataset, BadObjectsJsonIsNamedWhenOpening) {
+  TempDir dir;
+  ASSERT_NO_FATAL_FAILURE(writeGroundTruthSample(dir));
+  ASSERT_TRUE(writeTextFile(dir / "objects.json",
+                            R"({"objects": [{"id": 0, "category": "chair",
+                                "T_world_object": {"t": [0, 0, 0], "q": [0, 0, 0, 1]}}]})"));
+  const auto dataset = openDataset(dir.path());
+  ASSERT_FALSE(dataset.ok());
+  EXPECT_EQ(dataset.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(dataset.status().message()), HasSubstr("objects.json"));
+  EXPECT_THAT(std::string(dataset.status().message()),
+              HasSubstr("objects[0].id must be an integer in 1..65535"));
 }
 
 TEST(TumTrajectory, WriteReadRoundTripIsExact) {
