@@ -125,8 +125,16 @@ int runIngestCommand(int argc, char** argv) {
     std::printf("session %s: %zu frames from %s\n", name.c_str(), ds.size(), path.c_str());
     size_t inserted = 0, merged = 0, skipped = 0;
     auto insert = [&](std::vector<gsm::RawSegment> segments) -> Status {
+      if (segments.empty()) return absl::OkStatus();
+      // The session's scene is stored at its end: until then its poses are verified against the
+      // map as it is now (as the server does).
+      const auto scene = std::make_shared<const tsdf::TsdfLayer>(map->tsdf().snapshot());
+      const database::LiveScenes live =
+          [&](const std::string& session) -> std::shared_ptr<const tsdf::TsdfLayer> {
+        return session == name ? scene : nullptr;
+      };
       for (const auto& segment : segments) {
-        auto report = (*db)->insertSegment(name, segment);
+        auto report = (*db)->insertSegment(name, segment, live);
         if (!report.ok()) {
           // A segment the database cannot take (e.g. no surface at the mesh weight) is skipped
           // and counted; storage errors end the run.
@@ -148,7 +156,7 @@ int runIngestCommand(int argc, char** argv) {
       return cli::reportError(kCommand, looped.status());
     }
     const Status scene =
-        (*store)->putScene(name, std::make_shared<const tsdf::TsdfLayer>(map->tsdf().clone()),
+        (*store)->putScene(name, std::make_shared<const tsdf::TsdfLayer>(map->tsdf().snapshot()),
                            std::make_shared<const gsm::LabelBlocks>(map->mainLabelBlocks()));
     if (!scene.ok()) return cli::reportError(kCommand, scene);
     const Status finished =

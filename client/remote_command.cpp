@@ -67,6 +67,11 @@ int stats(v1::ObjectDatabase::Stub& stub, const Options& o) {
   std::printf("database: %.1f MB on disk; %llu jobs cancelled, %llu unreadable candidates skipped\n",
               double(s.database_size_bytes()) / 1e6, (unsigned long long)s.jobs_cancelled(),
               (unsigned long long)s.candidates_skipped());
+  std::printf("scene checks: %llu poses verified, %llu candidates rejected by them, %llu poses "
+              "without a scene map\n",
+              (unsigned long long)s.scene_checks(),
+              (unsigned long long)s.candidates_rejected_by_scene(),
+              (unsigned long long)s.poses_without_scene());
   return 0;
 }
 
@@ -144,6 +149,11 @@ int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
     std::printf("  seen in %-20s at (%.3f, %.3f, %.3f), q (%.4f, %.4f, %.4f, %.4f), segment %llu\n",
                 p.session_name().c_str(), T.x(), T.y(), T.z(), T.qx(), T.qy(), T.qz(), T.qw(),
                 (unsigned long long)p.segment_id());
+  }
+  for (const auto& m : d.merges()) {
+    std::printf("  merged %-26s e_ICP %.4f m, e_TSDF %.4f m, o_TSDF %llu, %u scene checks\n",
+                m.source().c_str(), m.icp_rmse_m(), m.tsdf_rmse_m(),
+                (unsigned long long)m.overlap_voxels(), m.scene_checks());
   }
   if (o.out.empty()) return 0;
   const Status written =

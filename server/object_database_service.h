@@ -1,5 +1,7 @@
-// objdb.v1.ObjectDatabase (DESIGN.md "Data flow", "Threads"): the server's session pipeline and
-// the queries over its database.
+// objdb.v1.ObjectDatabase (DESIGN.md "Data flow", "Threads"): the server's sessions and the
+// queries over its database. The frame pipeline itself is server/session/live_session.h, the
+// Ingest call's reactor server/ingest_stream.h; this class owns the sessions, the database thread
+// and the RPC handlers (queries in queries.cpp, recovery at start in session_recovery.cpp).
 //
 // - Ingest: one stream = one session. The header is checked (name, intrinsics, parameters; the
 //   database's model settings must stay the same) and the session stored as open; a frame worker
@@ -110,7 +112,6 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
                                      v1::GetStatsResponse* response) override;
 
  private:
-  friend class IngestReactor;
   friend class SceneMeshReactor;
   ObjectDatabaseService(const ServiceOptions& options, storage::SqliteStore* store,
                         std::unique_ptr<database::ObjectDatabase> db);
@@ -184,6 +185,11 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
 
   std::atomic<uint64_t> jobs_cancelled_{0};
   std::atomic<uint64_t> candidates_skipped_{0};
+  // Model-to-scene verification since start (GetStats): poses verified, candidates rejected at
+  // the scene check, and poses that had no scene map (each rejects its candidate).
+  std::atomic<uint64_t> scene_checks_{0};
+  std::atomic<uint64_t> candidates_rejected_by_scene_{0};
+  std::atomic<uint64_t> poses_without_scene_{0};
   std::condition_variable janitor_wake_;  // with mutex_: stop() wakes the janitor
   std::thread janitor_;
   std::unique_ptr<JobQueue> database_queue_;  // last: its thread stops first

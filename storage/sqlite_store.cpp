@@ -774,12 +774,25 @@ StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
 }
 
 StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecords() const {
+  return readMergeRecords(std::nullopt);
+}
+
+StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecordsInto(int64_t target) const {
+  return readMergeRecords(target);
+}
+
+StatusOr<std::vector<database::MergeRecord>> SqliteStore::readMergeRecords(
+    std::optional<int64_t> target) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
       Statement::prepare(*lease,
-                         "SELECT id, target, source, transform, icp_rmse_m, tsdf_rmse_m, "
-                         "tsdf_overlap, scene_checks FROM merge_records ORDER BY id"));
+                         target ? "SELECT id, target, source, transform, icp_rmse_m, tsdf_rmse_m, "
+                                  "tsdf_overlap, scene_checks FROM merge_records WHERE target = ? "
+                                  "ORDER BY id"
+                                : "SELECT id, target, source, transform, icp_rmse_m, tsdf_rmse_m, "
+                                  "tsdf_overlap, scene_checks FROM merge_records ORDER BY id"));
+  if (target) s.bind(1, *target);
   std::vector<database::MergeRecord> records;
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());

@@ -181,6 +181,8 @@ class SqliteStore : public database::ModelStore {
   StatusOr<std::vector<int64_t>> modelIds() const override;
   StatusOr<database::MatchEntries> matchEntries() const override;
   StatusOr<std::vector<database::MergeRecord>> mergeRecords() const override;
+  // The merge records whose target is model `target`, oldest first.
+  StatusOr<std::vector<database::MergeRecord>> mergeRecordsInto(int64_t target) const;
   Status putScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene,
                   std::shared_ptr<const gsm::LabelBlocks> labels = nullptr) override;
   StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> scene(
@@ -226,6 +228,8 @@ class SqliteStore : public database::ModelStore {
   SqliteStore(std::string path, SqliteStoreOptions options);
   StatusOr<ReaderLease> reader() const;
   Status requireWriter() const;
+  StatusOr<std::vector<database::MergeRecord>> readMergeRecords(
+      std::optional<int64_t> target) const;
   StatusOr<int64_t> sessionIdForWrite(const std::string& name);
   Status writeObservations(int64_t model_id, const EncodedModel& model, bool replace);
   // A map (TSDF blocks, optional main labels) into `tables`, replacing the session's earlier one;

@@ -170,7 +170,7 @@ StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::Object
 
 CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
                                          const model::ObjectModel& candidate,
-                                         InsertTimings* timings) {
+                                         const LiveScenes& live, InsertTimings* timings) {
   CandidateResult result;
   result.model_id = candidate.id;
   auto t = Clock::now();
@@ -207,18 +207,26 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
     poses.emplace_back(o.session, o.T_world_object * T_i_j);
   }
   for (const auto& [session, T_world_object] : poses) {
-    auto stored_scene = store_->scene(session);
-    if (!stored_scene.ok()) {
-      result.stage = "scene";
-      result.reason = absl::StrFormat("scene of session %s unreadable: %s", session,
-                                      stored_scene.status().message());
-      timings->scene_verify_ms += msSince(t);
-      return result;
+    std::shared_ptr<const tsdf::TsdfLayer> scene = live ? live(session) : nullptr;
+    if (scene == nullptr) {
+      auto stored_scene = store_->scene(session);
+      if (!stored_scene.ok()) {
+        result.stage = "scene";
+        result.reason = absl::StrFormat("scene of session %s unreadable: %s", session,
+                                        stored_scene.status().message());
+        timings->scene_verify_ms += msSince(t);
+        return result;
+      }
+      scene = *std::move(stored_scene);
     }
-    const auto& scene = *stored_scene;
     if (scene == nullptr) {
       ++result.scenes_missing;
-      continue;
+      result.stage = "scene";
+      result.reason = absl::StrFormat(
+          "session %s has no scene map (neither live nor stored) to verify the pose against",
+          session);
+      timings->scene_verify_ms += msSince(t);
+      return result;
     }
     const matching::Verdict verdict =
         matching::judge(matching::compareGrids(merged, *scene, T_world_object.inverse()),
@@ -229,6 +237,10 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
       timings->scene_verify_ms += msSince(t);
       return result;
     }
+    result.scene_rmse_max = std::max(result.scene_rmse_max, verdict.agreement.rmse);
+    result.scene_overlap_min = result.scene_checks == 0
+                                   ? verdict.agreement.overlap
+                                   : std::min(result.scene_overlap_min, verdict.agreement.overlap);
     ++result.scene_checks;
   }
   timings->scene_verify_ms += msSince(t);
@@ -237,7 +249,8 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
 }
 
 StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
-                                                     const gsm::RawSegment& segment) {
+                                                     const gsm::RawSegment& segment,
+                                                     const LiveScenes& live) {
   const auto start = Clock::now();
   if (session.empty()) return absl::InvalidArgumentError("insert: the session name is empty");
   OBJDB_RETURN_IF_ERROR(validateTransform(segment.T_world_segment, "raw segment pose"));
@@ -314,7 +327,7 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     std::atomic<size_t> next{begin};
     auto work = [&] {
       for (size_t c = next++; c < end; c = next++) {
-        report.results[c] = evaluate(incoming, *loaded[c], &per_candidate[c]);
+        report.results[c] = evaluate(incoming, *loaded[c], live, &per_candidate[c]);
       }
     };
     if (end - begin <= 1) {
@@ -325,6 +338,11 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
       for (auto& thread : pool) thread.join();
     }
     for (size_t c = begin; c < end; ++c) accepted += report.results[c].accepted ? 1 : 0;
+  }
+  for (const auto& r : report.results) {
+    if (r.accepted || r.stage == "skipped") continue;
+    logger("database")->debug("segment {}/{}: candidate object {} rejected at the {} check: {}",
+                              session, segment.label, r.model_id, r.stage, r.reason);
   }
   for (const auto& t : per_candidate) {
     report.timings.match_register_ms += t.match_register_ms;
@@ -377,9 +395,11 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     changed(target.id, std::move(entry));
     report.model_id = target.id;
     report.merged = true;
-    logger("database")->info("segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {})",
-                 session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m,
-                 merge.tsdf_overlap);
+    logger("database")->info(
+        "segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {}; scene "
+        "checks {}, worst e_TSDF {:.4f} m, least o_TSDF {})",
+        session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m, merge.tsdf_overlap,
+        best->scene_checks, best->scene_rmse_max, best->scene_overlap_min);
   }
   report.timings.store_ms = msSince(t_store);
   report.timings.total_ms = msSince(start);

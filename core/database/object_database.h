@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -34,8 +35,17 @@ struct CandidateResult {
   matching::Registration registration;
   matching::Verdict model_verdict;
   size_t scene_checks = 0;     // poses verified against their scene
-  size_t scenes_missing = 0;   // poses whose session has no scene map (not checked)
+  // Poses whose session had no scene map, neither live nor stored: the candidate is rejected at
+  // the first (a merge is never accepted on the model-to-model check alone).
+  size_t scenes_missing = 0;
+  double scene_rmse_max = 0.0;    // worst e_TSDF of the poses checked, metres
+  size_t scene_overlap_min = 0;   // smallest o_TSDF of the poses checked
 };
+
+// The scene maps of sessions the store does not hold yet (live sessions: the server's GSM
+// snapshots). Returns null for a session it does not know; the store is asked then.
+using LiveScenes =
+    std::function<std::shared_ptr<const tsdf::TsdfLayer>(const std::string& session)>;
 
 // Per insert, ms (paper table II: P, K, D, MR, MV, SV).
 struct InsertTimings {
@@ -67,7 +77,10 @@ class ObjectDatabase {
 
   // Algorithm 1 for one raw segment of `session`. A segment whose (session, label) was inserted
   // before replaces its earlier contribution (the model it went into is rebuilt without it).
-  StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment);
+  // Every pose of both models is verified against its session's scene: from `live` first, else
+  // the store; a pose with neither rejects the candidate (counted in scenes_missing).
+  StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment,
+                                       const LiveScenes& live = {});
 
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
   StatusOr<std::vector<int64_t>> candidatesFor(const model::ObjectModel& model);
@@ -79,7 +92,7 @@ class ObjectDatabase {
                                                      int64_t id);
   Status removeContribution(const SegmentKey& key, int64_t model_id);
   CandidateResult evaluate(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
-                           InsertTimings* timings);
+                           const LiveScenes& live, InsertTimings* timings);
   std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);
   // A model this database added, replaced (entry given) or removed (no entry): drops its cached
   // index and updates the prefilter's entries.

@@ -161,7 +161,8 @@ size_t MeshLayer::update(TsdfLayer* layer, bool all) {
   absl::flat_hash_set<BlockIndex, BlockIndexHash> dirty;
   for (const auto& [index, block] : layer->blocks()) {
     if (!all && !block->updated) continue;
-    block->updated = false;
+    // Through the mutable accessor: a block shared with a snapshot is copied, not changed.
+    if (block->updated) layer->block(index)->updated = false;
     // Cells of the lower neighbours read this block's voxels.
     for (int dz = -1; dz <= 0; ++dz) {
       for (int dy = -1; dy <= 0; ++dy) {
@@ -209,7 +210,7 @@ TriangleMesh MeshLayer::mesh() const {
 }
 
 TriangleMesh extractMesh(const TsdfLayer& layer, float min_weight) {
-  TsdfLayer copy = layer.clone();
+  TsdfLayer copy = layer.snapshot();  // update() clears flags: never on the caller's blocks
   MeshLayer mesher(min_weight);
   mesher.update(&copy, true);
   return mesher.mesh();

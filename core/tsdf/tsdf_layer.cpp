@@ -1,5 +1,6 @@
 #include "core/tsdf/tsdf_layer.h"
 
+#include <atomic>
 #include <cmath>
 
 namespace objdb::tsdf {
@@ -36,9 +37,20 @@ size_t TsdfLayer::linearInBlock(const VoxelIndex& v) const {
   return size_t(local.x()) + size_t(vps_) * (size_t(local.y()) + size_t(vps_) * size_t(local.z()));
 }
 
+TsdfBlock* TsdfLayer::unshare(std::shared_ptr<TsdfBlock>* slot) {
+  if (slot->use_count() > 1) {
+    *slot = std::make_shared<TsdfBlock>(**slot);
+  } else {
+    // The last snapshot sharing this block may just have been released on another thread: its
+    // reads happen before these writes (the release in shared_ptr's count decrement).
+    std::atomic_thread_fence(std::memory_order_acquire);
+  }
+  return slot->get();
+}
+
 TsdfBlock* TsdfLayer::block(const BlockIndex& b) {
   const auto it = blocks_.find(b);
-  return it == blocks_.end() ? nullptr : it->second.get();
+  return it == blocks_.end() ? nullptr : unshare(&it->second);
 }
 
 const TsdfBlock* TsdfLayer::block(const BlockIndex& b) const {
@@ -48,8 +60,11 @@ const TsdfBlock* TsdfLayer::block(const BlockIndex& b) const {
 
 TsdfBlock& TsdfLayer::allocateBlock(const BlockIndex& b) {
   auto& slot = blocks_[b];
-  if (!slot) slot = std::make_unique<TsdfBlock>(vps_);
-  return *slot;
+  if (!slot) {
+    slot = std::make_shared<TsdfBlock>(vps_);
+    return *slot;
+  }
+  return *unshare(&slot);
 }
 
 const TsdfVoxel* TsdfLayer::voxel(const VoxelIndex& v) const {
@@ -103,9 +118,21 @@ TsdfLayer TsdfLayer::clone() const {
   TsdfLayer copy(voxel_size_, vps_);
   copy.blocks_.reserve(blocks_.size());
   for (const auto& [index, block] : blocks_) {
-    copy.blocks_.emplace(index, std::make_unique<TsdfBlock>(*block));
+    copy.blocks_.emplace(index, std::make_shared<TsdfBlock>(*block));
   }
   return copy;
+}
+
+TsdfLayer TsdfLayer::snapshot() const {
+  TsdfLayer copy(voxel_size_, vps_);
+  copy.blocks_ = blocks_;
+  return copy;
+}
+
+size_t TsdfLayer::numSharedBlocks() const {
+  size_t n = 0;
+  for (const auto& [index, block] : blocks_) n += block.use_count() > 1 ? 1 : 0;
+  return n;
 }
 
 size_t TsdfLayer::numObservedVoxels() const {

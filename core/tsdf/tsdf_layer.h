@@ -1,6 +1,8 @@
 // Sparse TSDF volume (paper §III-B, after voxblox): blocks of voxels_per_side³ voxels in a hash
 // map keyed by block index, allocated only where surfaces were seen. A voxel holds a truncated
 // signed distance (metres, positive in front of the surface), a fusion weight and a colour.
+// Blocks are shared copy-on-write: snapshot() is a read-only view of the layer as it is now that
+// costs one pointer per block; the layer copies a shared block the first time it writes to it.
 #pragma once
 
 #include <cstdint>
@@ -69,6 +71,7 @@ class TsdfLayer {
   BlockIndex blockOfVoxel(const VoxelIndex& v) const;
   size_t linearInBlock(const VoxelIndex& v) const;
 
+  // Mutable access copies a block shared with a snapshot first (copy-on-write).
   TsdfBlock* block(const BlockIndex& b);
   const TsdfBlock* block(const BlockIndex& b) const;
   TsdfBlock& allocateBlock(const BlockIndex& b);
@@ -82,15 +85,26 @@ class TsdfLayer {
   // The same, with the weight interpolated too.
   bool interpolate(const Eigen::Vector3f& p, float* distance, float* weight) const;
 
-  // A deep copy (layers are move-only: blocks are owned).
+  TsdfLayer(TsdfLayer&&) = default;
+  TsdfLayer& operator=(TsdfLayer&&) = default;
+  TsdfLayer(const TsdfLayer&) = delete;  // clone() or snapshot(): say which
+  TsdfLayer& operator=(const TsdfLayer&) = delete;
+
+  // A deep copy.
   TsdfLayer clone() const;
+  // The layer as it is now, sharing its blocks: O(blocks) pointers, no voxel copied. Later writes
+  // to either layer copy the block they write first (the mutable accessors below do), so the
+  // snapshot never changes. A snapshot may be read on another thread while this layer is written,
+  // provided only this layer's owner makes snapshots of it.
+  TsdfLayer snapshot() const;
+  // Blocks this layer shares with a snapshot (or a snapshot with its layer).
+  size_t numSharedBlocks() const;
   // Voxels with weight > 0.
   size_t numObservedVoxels() const;
 
-  const absl::flat_hash_map<BlockIndex, std::unique_ptr<TsdfBlock>, BlockIndexHash>& blocks()
-      const {
-    return blocks_;
-  }
+  using BlockMap = absl::flat_hash_map<BlockIndex, std::shared_ptr<TsdfBlock>, BlockIndexHash>;
+  // Read the blocks through this; write through block() / allocateBlock(), which unshare.
+  const BlockMap& blocks() const { return blocks_; }
   // Bytes held by allocated blocks (voxels only).
   size_t voxelBytes() const { return blocks_.size() * size_t(vps_) * vps_ * vps_ * sizeof(TsdfVoxel); }
 
@@ -101,7 +115,9 @@ class TsdfLayer {
   float block_size_;
   float inv_voxel_size_;
   float inv_block_size_;
-  absl::flat_hash_map<BlockIndex, std::unique_ptr<TsdfBlock>, BlockIndexHash> blocks_;
+  // The block behind `slot`, copied first when a snapshot shares it.
+  TsdfBlock* unshare(std::shared_ptr<TsdfBlock>* slot);
+  BlockMap blocks_;
 };
 
 }  // namespace objdb::tsdf

@@ -96,8 +96,13 @@ gsm::Gsm runPipeline(const std::string& name, size_t frames, database::ModelStor
   auto map = gsm::Gsm::create(params.tsdf, params.gsm, r.intrinsics, 2);
   auto db = database::ObjectDatabase::create(params, store);
   EXPECT_TRUE(segmenter.ok() && map.ok() && db.ok());
+  // As the server does: the session's poses are verified against its map as it is now.
   auto insert = [&](std::vector<gsm::RawSegment> segments) {
-    for (const auto& s : segments) (void)(*db)->insertSegment(name, s);
+    const auto scene = std::make_shared<const tsdf::TsdfLayer>(map->tsdf().snapshot());
+    const database::LiveScenes live = [&](const std::string& session) {
+      return session == name ? scene : nullptr;
+    };
+    for (const auto& s : segments) (void)(*db)->insertSegment(name, s, live);
   };
   for (size_t k = 0; k < frames; ++k) {
     auto depth = depthFromRaw(r.depth[k], kMetresPerUnit);

@@ -1,7 +1,9 @@
 #include "core/tsdf/tsdf_layer.h"
 
+#include <atomic>
 #include <cmath>
 #include <random>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -83,6 +85,54 @@ TEST(TsdfLayer, TrilinearInterpolationIsExactOnLinearFields) {
   EXPECT_FALSE(layer.interpolateDistance({1.0f, 1.0f, 1.0f}, &d));  // no blocks there
   layer.voxel({0, 0, 0})->weight = 0.0f;  // an unobserved corner
   EXPECT_FALSE(layer.interpolateDistance({0.03f, 0.03f, 0.03f}, &d));
+}
+
+TEST(TsdfLayer, ASnapshotSharesBlocksAndNeverSeesLaterWrites) {
+  TsdfLayer layer = TsdfLayer::create(0.1f, 4).value();
+  for (int x = 0; x < 3; ++x) layer.allocateBlock({x, 0, 0}).voxel(0).distance = float(x);
+  const TsdfLayer snap = layer.snapshot();
+  EXPECT_EQ(snap.numBlocks(), 3u);
+  EXPECT_EQ(layer.numSharedBlocks(), 3u);  // no voxel copied yet
+  // Writes through every mutable path: the written block is copied first, the others stay shared.
+  layer.block({0, 0, 0})->voxel(0).distance = 10.0f;
+  layer.voxel({4, 0, 0})->distance = 11.0f;          // block (1, 0, 0)
+  layer.allocateBlock({3, 0, 0}).voxel(0).distance = 12.0f;  // new block: not in the snapshot
+  EXPECT_EQ(layer.numSharedBlocks(), 1u);  // block (2, 0, 0) only
+  EXPECT_EQ(snap.block({0, 0, 0})->voxel(0).distance, 0.0f);
+  EXPECT_EQ(snap.block({1, 0, 0})->voxel(0).distance, 1.0f);
+  EXPECT_EQ(snap.block({3, 0, 0}), nullptr);
+  EXPECT_EQ(layer.block({0, 0, 0})->voxel(0).distance, 10.0f);
+  EXPECT_EQ(layer.block({1, 0, 0})->voxel(0).distance, 11.0f);
+  // A block the layer writes again after the snapshot is gone is written in place.
+  const TsdfBlock* before = &*layer.blocks().at(BlockIndex(0, 0, 0));
+  layer.block({0, 0, 0})->voxel(1).distance = 5.0f;
+  EXPECT_EQ(&*layer.blocks().at(BlockIndex(0, 0, 0)), before);
+}
+
+TEST(TsdfLayer, ASnapshotReadOnAnotherThreadKeepsItsValuesWhileTheLayerIsWritten) {
+  TsdfLayer layer = TsdfLayer::create(0.1f, 8).value();
+  for (int x = 0; x < 64; ++x) {
+    for (auto& v : layer.allocateBlock({x, 0, 0}).voxels()) v.distance = 1.0f;
+  }
+  auto snap = std::make_shared<const TsdfLayer>(layer.snapshot());
+  std::atomic<bool> changed{false};
+  std::thread reader([snap, &changed] {
+    for (int round = 0; round < 200; ++round) {
+      for (const auto& [index, block] : snap->blocks()) {
+        for (const auto& v : block->voxels()) {
+          if (v.distance != 1.0f) changed = true;
+        }
+      }
+    }
+  });
+  for (int round = 0; round < 50; ++round) {
+    for (int x = 0; x < 64; ++x) {
+      for (auto& v : layer.block({x, 0, 0})->voxels()) v.distance = float(round + 2);
+    }
+  }
+  reader.join();
+  EXPECT_FALSE(changed);
+  EXPECT_EQ(layer.block({5, 0, 0})->voxel(3).distance, 51.0f);
 }
 
 }  // namespace

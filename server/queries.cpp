@@ -1,0 +1,347 @@
+// The read-only calls of the ObjectDatabase service: ListSessions, ListObjects, GetObject,
+// GetSceneMesh (meshed on a worker thread, streamed in chunks) and GetStats. They read the SQLite
+// file through its reader connections; a live session adds its in-memory state and counters.
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "absl/strings/str_format.h"
+#include "core/completion/scene_completion.h"
+#include "core/tsdf/mesh_extraction.h"
+#include "server/job_queue.h"
+#include "server/object_database_service.h"
+#include "server/proto_convert.h"
+#include "server/service_util.h"
+#include "server/session/live_session.h"
+
+namespace objdb::server {
+
+StatusOr<std::vector<uint64_t>> ObjectDatabaseService::objectsOf(const std::string& session) {
+  std::vector<uint64_t> ids;
+  storage::ModelQuery query;
+  query.session = session;
+  query.limit = kMaxPageSize;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::ModelSummary> page,
+                           store_->modelSummaries(query));
+    for (const auto& m : page) ids.push_back(uint64_t(m.id));
+    if (page.size() < query.limit) break;
+    query.after_id = page.back().id;
+  }
+  return ids;
+}
+
+StatusOr<v1::SessionSummary> ObjectDatabaseService::summaryOf(LiveSession& session) {
+  v1::SessionSummary summary;
+  summary.set_session_name(session.name);
+  {
+    std::lock_guard lock(session.mutex);
+    summary.set_state(session.state);
+    *summary.mutable_counters() = session.counters;
+  }
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<uint64_t> ids, objectsOf(session.name));
+  for (uint64_t id : ids) summary.add_object_ids(id);
+  return summary;
+}
+
+void ObjectDatabaseService::describe(const storage::SessionInfo& stored, v1::SessionInfo* out) {
+  out->set_session_name(stored.name);
+  out->set_state(toProto(stored.state));
+  out->set_started_unix_s(unixSeconds(stored.started_at));
+  out->set_ended_unix_s(unixSeconds(stored.ended_at));
+  *out->mutable_intrinsics() = intrinsicsFromJson(stored.intrinsics_json);
+  out->mutable_counters()->set_frames_integrated(uint64_t(stored.frames));
+  // A session this server runs: its live state and counters.
+  if (std::shared_ptr<LiveSession> live = liveSession(stored.name)) {
+    std::lock_guard lock(live->mutex);
+    out->set_state(live->state);
+    out->set_client_info(live->client_info);
+    out->set_started_unix_s(live->started_unix_s);
+    out->set_ended_unix_s(live->ended_unix_s);
+    *out->mutable_counters() = live->counters;
+  }
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::ListSessions(
+    grpc::CallbackServerContext* context, const v1::ListSessionsRequest* request,
+    v1::ListSessionsResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
+  auto after = parsePageToken(request->page_token(), 's', 0);
+  if (!after.ok()) return finishUnary(context, after.status());
+  auto stored = store_->sessions();
+  if (!stored.ok()) return finishUnary(context, stored.status());
+  const uint32_t limit = pageSize(request->page_size());
+  int64_t last = *after;
+  for (const auto& s : *stored) {
+    if (s.id <= *after) continue;
+    if (response->sessions_size() == int(limit)) {
+      response->set_next_page_token(pageToken('s', last, 0));
+      break;
+    }
+    describe(s, response->add_sessions());
+    last = s.id;
+  }
+  return finishUnary(context, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServerContext* context,
+                                                             const v1::ListObjectsRequest* request,
+                                                             v1::ListObjectsResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
+  const uint64_t filter = std::hash<std::string>()(request->session_name()) * 2 +
+                          (request->include_merged() ? 1 : 0);
+  auto after = parsePageToken(request->page_token(), 'o', filter);
+  if (!after.ok()) return finishUnary(context, after.status());
+  if (!request->session_name().empty()) {
+    auto stored = store_->sessions();
+    if (!stored.ok()) return finishUnary(context, stored.status());
+    const bool known = std::any_of(stored->begin(), stored->end(), [&](const auto& s) {
+      return s.name == request->session_name();
+    });
+    if (!known) {
+      return finishUnary(context, absl::NotFoundError(absl::StrFormat(
+                                      "no session named \"%s\"", request->session_name())));
+    }
+  }
+  storage::ModelQuery query;
+  query.after_id = *after;
+  query.limit = pageSize(request->page_size()) + 1;  // one more: is there a next page?
+  query.session = request->session_name();
+  query.include_merged = request->include_merged();
+  auto models = store_->modelSummaries(query);
+  if (!models.ok()) return finishUnary(context, models.status());
+  const bool more = models->size() == query.limit;
+  if (more) models->pop_back();
+  for (const auto& m : *models) toProto(m, response->add_objects());
+  if (more) response->set_next_page_token(pageToken('o', models->back().id, filter));
+  return finishUnary(context, absl::OkStatus());
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerContext* context,
+                                                           const v1::GetObjectRequest* request,
+                                                           v1::ObjectDetail* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
+  auto run = [&]() -> Status {
+    if (request->id() == 0 || request->id() > uint64_t(INT64_MAX)) {
+      return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
+    }
+    const int64_t id = int64_t(request->id());
+    storage::ModelQuery query;
+    query.after_id = id - 1;
+    query.limit = 1;
+    query.include_merged = true;
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::ModelSummary> found,
+                           store_->modelSummaries(query));
+    if (found.empty() || found.front().id != id) {
+      return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
+    }
+    const storage::ModelSummary& summary = found.front();
+    toProto(summary, response->mutable_summary());
+    v1::ObjectStats& stats = *response->mutable_stats();
+    std::set<uint64_t> segments;
+    for (const auto& o : summary.observations) {
+      v1::ObjectPose& pose = *response->add_poses();
+      pose.set_session_name(o.session);
+      *pose.mutable_t_world_object() = toProto(o.T_world_object);
+      pose.set_segment_id(uint64_t(o.raw_segment_id));
+      if (o.raw_segment_id > 0) segments.insert(uint64_t(o.raw_segment_id));
+    }
+    for (uint64_t s : segments) stats.add_segment_ids(s);
+    stats.set_num_points(uint32_t(summary.num_points));
+    stats.set_num_keypoints(uint32_t(summary.num_keypoints));
+    stats.set_voxel_size_m(summary.voxel_size);
+    stats.set_num_merges(uint32_t(summary.merges));
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<database::MergeRecord> merges,
+                           store_->mergeRecordsInto(id));
+    for (const auto& m : merges) {
+      v1::MergeEvidence& ev = *response->add_merges();
+      ev.set_icp_rmse_m(m.icp_rmse_m);
+      ev.set_tsdf_rmse_m(m.tsdf_rmse_m);
+      ev.set_overlap_voxels(m.tsdf_overlap);
+      *ev.mutable_t_into_merged() = toProto(m.T_target_source);
+      ev.set_scene_checks(uint32_t(m.scene_checks));
+      ev.set_source(m.source);
+    }
+    if (summary.state != "active") return absl::OkStatus();  // merged: its geometry moved on
+    OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const model::ObjectModel> model, store_->model(id));
+    const size_t per_block = size_t(std::pow(model->grid.voxelsPerSide(), 3));
+    stats.set_num_voxels(uint32_t(model->grid.numBlocks() * per_block));
+    if (request->include_mesh()) {
+      toProto(tsdf::extractMesh(model->grid, options_.params.tsdf.mesh_min_weight),
+              response->mutable_mesh());
+    }
+    if (request->include_cloud()) toProto(model->cloud, response->mutable_cloud());
+    const size_t bytes = response->ByteSizeLong();
+    if (bytes > options_.max_send_message_bytes) {
+      return absl::ResourceExhaustedError(absl::StrFormat(
+          "object %d with its %s is %d bytes, above the server's message limit of %d bytes; ask "
+          "for less (include_mesh / include_cloud)",
+          id, request->include_mesh() ? "mesh" : "cloud", bytes, options_.max_send_message_bytes));
+    }
+    return absl::OkStatus();
+  };
+  const Status status = run();
+  if (!status.ok()) response->Clear();
+  return finishUnary(context, status);
+}
+
+// Streams a session's mesh in chunks; the mesh is made on a worker thread.
+class SceneMeshReactor final : public grpc::ServerWriteReactor<v1::MeshChunk> {
+ public:
+  void start(std::vector<TriangleMesh> chunks) {
+    std::lock_guard lock(mutex_);
+    chunks_ = std::move(chunks);
+    writeNext();
+  }
+  void fail(const Status& status) {
+    std::lock_guard lock(mutex_);
+    Finish(toGrpcStatus(status));
+  }
+  void OnWriteDone(bool ok) override {
+    std::lock_guard lock(mutex_);
+    if (!ok) {
+      Finish(grpc::Status(grpc::StatusCode::CANCELLED, "the client stopped reading"));
+      return;
+    }
+    writeNext();
+  }
+  // start() and fail() run on a worker thread and may call Finish, after which gRPC may call
+  // OnDone on another thread before they have released the mutex: wait for it before deleting.
+  void OnDone() override {
+    { std::lock_guard lock(mutex_); }
+    delete this;
+  }
+
+ private:
+  void writeNext() {
+    if (next_ >= chunks_.size()) {
+      Finish(grpc::Status::OK);
+      return;
+    }
+    chunk_.Clear();
+    chunk_.set_chunk_index(uint32_t(next_));
+    chunk_.set_last(next_ + 1 == chunks_.size());
+    toProto(chunks_[next_], chunk_.mutable_mesh());
+    chunks_[next_] = TriangleMesh();
+    ++next_;
+    StartWrite(&chunk_);
+  }
+  std::mutex mutex_;
+  std::vector<TriangleMesh> chunks_;
+  size_t next_ = 0;
+  v1::MeshChunk chunk_;
+};
+
+grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
+    grpc::CallbackServerContext* context, const v1::GetSceneMeshRequest* request) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return new RefusedCall<grpc::ServerWriteReactor<v1::MeshChunk>>(toGrpcStatus(allowed));
+  }
+  auto* reactor = new SceneMeshReactor();
+  const std::string name = request->session_name();
+  const bool completed = request->completed();
+  startWorker([this, reactor, name, completed, context] {
+    auto run = [&]() -> StatusOr<std::vector<TriangleMesh>> {
+      OBJDB_RETURN_IF_ERROR(checkNotRecovering(name));
+      OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+      const auto it = std::find_if(stored.begin(), stored.end(),
+                                   [&](const auto& s) { return s.name == name; });
+      if (it == stored.end()) {
+        return absl::NotFoundError(absl::StrFormat("no session named \"%s\"", name));
+      }
+      OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const tsdf::TsdfLayer> scene,
+                             store_->scene(name));
+      if (!scene) {
+        if (it->state == storage::SessionState::kOpen || liveSession(name) != nullptr) {
+          return absl::FailedPreconditionError(absl::StrFormat(
+              "session %s has no stored map yet (state %s): EndSession stores it", name,
+              storage::sessionStateName(it->state)));
+        }
+        OBJDB_ASSIGN_OR_RETURN(const int64_t saved_frames, store_->savedMapFrames(name));
+        if (saved_frames >= 0) {
+          return recoveryFailed(name, saved_frames);
+        }
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "session %s has no stored map (state %s): it was not ended before the server stopped "
+            "and its map was not kept",
+            name, storage::sessionStateName(it->state)));
+      }
+      // The session's own parameters decide its mesh; the server's its completion.
+      const Params params = storedSessionParams(*it);
+      TriangleMesh mesh;
+      if (completed) {
+        // A deadline or a cancel stops the work between models.
+        OBJDB_ASSIGN_OR_RETURN(
+            const tsdf::TsdfLayer full,
+            completion::completeScene(*store_, name, options_.params.merging,
+                                      params.tsdf.max_weight, nullptr,
+                                      [context] { return context->IsCancelled(); }));
+        mesh = tsdf::extractMesh(full, params.tsdf.mesh_min_weight);
+      } else {
+        mesh = tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight);
+      }
+      return splitMesh(mesh, options_.mesh_chunk_bytes);
+    };
+    auto chunks = run();
+    if (!chunks.ok()) {
+      if (absl::IsCancelled(chunks.status())) jobs_cancelled_.fetch_add(1);
+      reactor->fail(chunks.status());
+      return;
+    }
+    if (chunks->empty()) chunks->emplace_back();  // one (empty, last) chunk: the mesh is empty
+    reactor->start(*std::move(chunks));
+  });
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerContext* context,
+                                                          const v1::GetStatsRequest*,
+                                                          v1::GetStatsResponse* response) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
+  auto run = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+    OBJDB_ASSIGN_OR_RETURN(const storage::StoreStats stats, store_->stats());
+    response->set_server_version(options_.version);
+    response->set_uptime_s(
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count());
+    response->set_sessions_total(stored.size());
+    uint64_t frames = 0;
+    uint32_t open = 0;
+    for (const auto& s : stored) {
+      std::shared_ptr<LiveSession> live = liveSession(s.name);
+      if (!live) {
+        frames += uint64_t(s.frames);
+        continue;
+      }
+      std::lock_guard lock(live->mutex);
+      frames += live->counters.frames_integrated();
+      open += live->streaming ? 1 : 0;
+    }
+    response->set_sessions_open(open);
+    response->set_frames_integrated(frames);
+    response->set_objects_active(uint64_t(stats.active_models));
+    response->set_objects_merged(uint64_t(stats.merged_models));
+    for (const auto& t : stats.tables) {
+      if (t.table == "raw_segments") response->set_segments_total(uint64_t(t.rows));
+    }
+    response->set_database_size_bytes(uint64_t(fileBytes(store_->path())));
+    response->set_queued_segments(uint32_t(database_queue_->pending()));
+    response->set_jobs_cancelled(jobs_cancelled_.load());
+    response->set_candidates_skipped(candidates_skipped_.load());
+    response->set_scene_checks(scene_checks_.load());
+    response->set_candidates_rejected_by_scene(candidates_rejected_by_scene_.load());
+    response->set_poses_without_scene(poses_without_scene_.load());
+    return absl::OkStatus();
+  };
+  return finishUnary(context, run());
+}
+
+}  // namespace objdb::server

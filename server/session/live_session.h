@@ -1,0 +1,133 @@
+// One session's frame pipeline (DESIGN.md "Data flow", steps 1-4; paper §III-A, §III-B): a frame
+// is validated and decoded, segmented, and fused into the session's Global Segmentation Map;
+// idle segments are extracted as database jobs, each carrying a snapshot of the map as it was at
+// extraction, so that the database can verify a merge against this live scene (paper §III-C.4,
+// model to scene) before the session has ended. Nothing here talks gRPC or SQLite: the service
+// wraps it (server/object_database_service.cpp).
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/common/intrinsics.h"
+#include "core/common/params.h"
+#include "core/common/status.h"
+#include "core/database/model_store.h"
+#include "core/gsm/gsm.h"
+#include "core/segmentation/depth_segmenter.h"
+#include "objdb/v1/objdb.pb.h"
+
+namespace objdb::server {
+
+struct IngestStream;
+
+// A raw segment waiting for the database, with why it was extracted.
+struct RawSegmentJob {
+  gsm::RawSegment segment;
+  v1::SegmentExtracted::Reason reason = v1::SegmentExtracted::IDLE;
+  uint64_t last_frame_index = 0;  // client index of the last frame that observed it
+  // The session's map (TSDF) when the segment was extracted, blocks shared copy-on-write with
+  // the live map: the scene this session's poses are verified against.
+  std::shared_ptr<const tsdf::TsdfLayer> scene;
+};
+
+// One session with a map in memory: from its header until EndSession.
+struct LiveSession {
+  std::string name;
+  Intrinsics intrinsics;
+  Params params;
+  std::string client_info;
+  double started_unix_s = 0.0;
+
+  // Used by one thread at a time: the stream's frame worker, then (after it) the database thread.
+  std::optional<segmentation::DepthSegmenter> segmenter;
+  std::optional<gsm::Gsm> map;
+  std::vector<uint64_t> frame_indices;  // client index of each integrated frame (GSM frame order)
+  bool has_frame = false;
+  uint64_t last_index = 0;
+  double last_timestamp = 0.0;
+
+  // EndSession's segments (the database thread's): extracted once, inserted front first, so a
+  // failed flush can be retried without losing any.
+  bool flush_extracted = false;
+  std::deque<RawSegmentJob> flush_jobs;
+
+  std::mutex mutex;  // guards what follows
+  v1::SessionState state = v1::SESSION_STATE_OPEN;
+  bool streaming = true;  // its Ingest stream (frame worker) is still running
+  double ended_unix_s = 0.0;
+  v1::SessionCounters counters;
+  std::weak_ptr<IngestStream> stream;
+  std::chrono::steady_clock::time_point stream_gone;  // when `streaming` became false
+  bool end_queued = false;  // the server queued its own end (idle too long, or stopping)
+  // Database jobs to queue when the frame worker is done (EndSession of an interrupted stream).
+  std::vector<std::function<void()>> after_stream;
+  // The newest map snapshot handed to the database (with the last extracted segments): the
+  // scene that models of this session are verified against while it is live.
+  std::shared_ptr<const tsdf::TsdfLayer> scene;
+
+  // Saving the map (maybeSaveMap): the frame worker's clock, a save waiting in the queue, and
+  // the frame count of the last save written.
+  std::chrono::steady_clock::time_point map_saved_at{};
+  std::atomic<bool> map_save_pending{false};
+  std::atomic<int64_t> map_saved_frames{0};
+  int64_t idle_save_tried = -1;  // frame count the janitor last queued a save for (mutex)
+
+  v1::SessionCounters snapshot() {
+    std::lock_guard lock(mutex);
+    return counters;
+  }
+  bool ended() {
+    std::lock_guard lock(mutex);
+    return state == v1::SESSION_STATE_ENDED;
+  }
+  std::shared_ptr<const tsdf::TsdfLayer> currentScene() {
+    std::lock_guard lock(mutex);
+    return scene;
+  }
+};
+
+// Checks a session header (name, client info, intrinsics, per-session parameter overrides on
+// top of `server_params`): the session it describes, without its pipeline yet. What the database
+// must agree to (model settings, a unique name) is the caller's. Errors: INVALID_ARGUMENT naming
+// the header field.
+StatusOr<std::shared_ptr<LiveSession>> sessionFromHeader(const v1::SessionHeader& header,
+                                                         const Params& server_params);
+// Builds the session's segmenter and map (its parameters are checked).
+Status startPipeline(LiveSession& session, int integration_threads);
+
+// Steps 1-3 for one frame: checks order, timestamp and pose, decodes depth (and colour),
+// segments it and fuses it into the map; fills ack->frame. Errors (INVALID_ARGUMENT): the frame
+// is bad and nothing of it was integrated; the session carries on.
+Status integrateFrame(LiveSession& session, const v1::Frame& frame, v1::FrameAck* ack);
+
+// Step 4: the segments idle for the GSM's idle time (every live one with `everything`), as jobs
+// that share one snapshot of the map, which also becomes session.scene. Runs on the thread that
+// owns the map.
+std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything,
+                                           v1::SegmentExtracted::Reason reason);
+
+// A copy of a live map to save, made by the thread that owns the map.
+struct MapCopy {
+  std::shared_ptr<const tsdf::TsdfLayer> map;
+  std::shared_ptr<const gsm::LabelBlocks> labels;
+  int64_t frames = 0;
+  double copy_ms = 0.0;
+};
+MapCopy copyMap(const gsm::Gsm& map);
+
+// Whether a stored raw segment is `segment`: the same pose (hence the same grid origin), the same
+// voxels (both lists in extractRawSegment's order) and the same TSDF values around them. Then
+// re-inserting it would change nothing; a label observed again after its extraction has new TSDF
+// values even where its voxels stayed.
+bool sameSegment(const database::RawSegmentRecord& stored, const gsm::RawSegment& segment);
+
+}  // namespace objdb::server
