@@ -27,7 +27,8 @@ Asks a running objdb server (objdb-server) about its database.
 
   stats     server and database statistics (GetStats)
   sessions  every session: state, frames, start and end time, client (ListSessions)
-  objects   the objects, one line each: sessions, poses, extent, planar (ListObjects; every page)
+  objects   the objects, one line each: sessions, poses, extent, surface (object, planar or
+            structure) (ListObjects; every page)
   object    one object's poses and statistics (GetObject); with --out its mesh (default) or its
             surface cloud with normals, in the object's base frame, as PLY
   scene     a session's mesh in its world frame as PLY (GetSceneMesh); --completed fills what the
@@ -104,7 +105,7 @@ int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
   request.set_include_merged(o.merged);
   request.set_page_size(1000);
   size_t count = 0;
-  std::printf("%8s %-7s %6s %-22s %7s  %s\n", "id", "state", "poses", "extent (m)", "planar",
+  std::printf("%8s %-7s %6s %-22s %-9s  %s\n", "id", "state", "poses", "extent (m)", "surface",
               "sessions");
   while (true) {
     grpc::ClientContext context;
@@ -113,9 +114,10 @@ int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
     const grpc::Status status = stub.ListObjects(&context, request, &page);
     if (!status.ok()) return cli::reportRpcError(kCommand, "ListObjects", o.connection.server, status);
     for (const auto& m : page.objects()) {
-      std::printf("%8llu %-7s %6u %-22s %7s  %s\n", (unsigned long long)m.id(),
+      std::printf("%8llu %-7s %6u %-22s %-9s  %s\n", (unsigned long long)m.id(),
                   m.state() == v1::OBJECT_STATE_MERGED ? "merged" : "active", m.num_poses(),
-                  extent(m.bounds_object()).c_str(), m.planar() ? "yes" : "no",
+                  extent(m.bounds_object()).c_str(),
+                  m.structure() ? "structure" : m.planar() ? "planar" : "object",
                   absl::StrJoin(m.session_names(), ", ").c_str());
       ++count;
     }
@@ -140,7 +142,9 @@ int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
               "%u merges\n",
               (unsigned long long)d.summary().id(),
               d.summary().state() == v1::OBJECT_STATE_MERGED ? "merged" : "active",
-              d.summary().planar() ? "planar" : "not planar",
+              d.summary().structure() ? "structure"
+              : d.summary().planar()  ? "planar"
+                                      : "not planar",
               extent(d.summary().bounds_object()).c_str(), d.stats().num_points(),
               d.stats().num_keypoints(), d.stats().num_voxels(), d.stats().voxel_size_m(),
               d.stats().num_merges());

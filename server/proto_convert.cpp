@@ -390,6 +390,7 @@ void toProto(const storage::ModelSummary& model, v1::ObjectSummary* out) {
   setVector(model.bbox_min, out->mutable_bounds_object()->mutable_min());
   setVector(model.bbox_max, out->mutable_bounds_object()->mutable_max());
   out->set_planar(model.planar);
+  out->set_structure(model.structure);
 }
 
 }  // namespace objdb::server

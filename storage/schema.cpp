@@ -131,12 +131,20 @@ CREATE TABLE saved_label_blocks (
 );
 )sql";
 
+// Room structure (issue 17): a model's flag, and the depth each raw segment was seen from (the
+// noise its planarity and structure tests use).
+constexpr const char* kSchemaV3 = R"sql(
+ALTER TABLE models ADD COLUMN structure INTEGER NOT NULL DEFAULT 0;
+ALTER TABLE raw_segments ADD COLUMN observation_depth_m REAL NOT NULL DEFAULT 0;
+)sql";
+
 }  // namespace
 
 const std::vector<Migration>& schemaMigrations() {
   static const std::vector<Migration> migrations = {
       {1, "sessions, scene maps, raw segments, models, observations, merge records", kSchemaV1},
       {2, "saved live maps of open sessions", kSchemaV2},
+      {3, "room structure: models.structure, raw_segments.observation_depth_m", kSchemaV3},
   };
   return migrations;
 }

@@ -28,6 +28,7 @@ namespace objdb::storage {
 // A model's columns, encoded outside the write lock.
 struct EncodedModel {
   bool planar = false;
+  bool structure = false;
   double plane_inlier_ratio = 0;
   int64_t num_points = 0, num_keypoints = 0;
   double voxel_size = 0;
@@ -58,6 +59,7 @@ Status inRow(const Status& status, std::string_view table, int64_t row, std::str
 EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
   EncodedModel e;
   e.planar = m.planar;
+  e.structure = m.structure;
   e.plane_inlier_ratio = m.plane_inlier_ratio;
   e.num_points = int64_t(m.cloud.points.size());
   e.num_keypoints = int64_t(m.keypoint_indices.size());
@@ -86,8 +88,8 @@ EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options
 constexpr const char* kModelColumns =
     "planar, plane_inlier_ratio, num_points, num_keypoints, voxel_size, bbox_min_x, bbox_min_y, "
     "bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, grid, surface_voxels, cloud, keypoints, "
-    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms";
-constexpr int kNumModelColumns = 20;
+    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms, structure";
+constexpr int kNumModelColumns = 21;
 
 void bindModel(Statement* s, const EncodedModel& e) {
   s->bind(1, int64_t(e.planar)).bind(2, e.plane_inlier_ratio).bind(3, e.num_points);
@@ -98,6 +100,7 @@ void bindModel(Statement* s, const EncodedModel& e) {
   s->bindBlob(15, e.keypoints).bindBlob(16, e.descriptors);
   s->bind(17, e.timings.cloud_ms).bind(18, e.timings.planarity_ms);
   s->bind(19, e.timings.keypoints_ms).bind(20, e.timings.descriptors_ms);
+  s->bind(21, int64_t(e.structure));
 }
 
 Status duplicateSession(const Status& status, const std::string& name) {
@@ -404,13 +407,17 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
             *writer_,
             absl::StrFormat(
                 "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
-                "extraction_frame, extracted_at) VALUES (?, ?, ?, ?, ?, ?, %s) "
+                "extraction_frame, observation_depth_m, extracted_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, %s) "
                 "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
                 "grid = excluded.grid, voxels = excluded.voxels, "
-                "extraction_frame = excluded.extraction_frame, extracted_at = excluded.extracted_at",
+                "extraction_frame = excluded.extraction_frame, "
+                "observation_depth_m = excluded.observation_depth_m, "
+                "extracted_at = excluded.extracted_at",
                 kNow)));
     s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, pose).bindBlob(4, grid);
     s.bindBlob(5, voxels).bind(6, segment.extraction_frame);
+    s.bind(7, double(segment.observation_depth_m));
     OBJDB_RETURN_IF_ERROR(s.run());
     return txn.commit();
   };
@@ -423,7 +430,8 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
       Statement::prepare(*lease,
-                         "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame "
+                         "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame, "
+                         "r.observation_depth_m "
                          "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
                          "WHERE s.name = ? AND r.label = ?"));
   s.bind(1, key.session).bind(2, int64_t(key.label));
@@ -444,6 +452,7 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
   if (!voxels.ok()) return inRow(voxels.status(), "raw_segments", id, "voxels");
   record->voxels = std::move(*voxels);
   record->extraction_frame = s.columnInt(4);
+  record->observation_depth_m = float(s.columnDouble(5));
   return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
 }
 
@@ -602,6 +611,7 @@ StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t i
   if (!descriptors.ok()) return inRow(descriptors.status(), "models", id, "descriptors");
   m.descriptors = std::move(*descriptors);
   m.timings = {s.columnDouble(16), s.columnDouble(17), s.columnDouble(18), s.columnDouble(19)};
+  m.structure = s.columnInt(20) != 0;
   for (uint32_t k : m.keypoint_indices) {
     if (k >= m.cloud.points.size()) {
       return absl::DataLossError(absl::StrFormat(
@@ -655,7 +665,8 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
                           "COALESCE(m.bbox_min_x, 0), COALESCE(m.bbox_min_y, 0), "
                           "COALESCE(m.bbox_min_z, 0), COALESCE(m.bbox_max_x, 0), "
                           "COALESCE(m.bbox_max_y, 0), COALESCE(m.bbox_max_z, 0), "
-                          "(SELECT COUNT(*) FROM merge_records r WHERE r.target = m.id) "
+                          "(SELECT COUNT(*) FROM merge_records r WHERE r.target = m.id), "
+                          "m.structure "
                           "FROM models m WHERE m.id > ?1 AND %s ORDER BY m.id LIMIT ?3",
                           where)));
   s.bind(1, query.after_id);
@@ -678,6 +689,7 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
       m.bbox_max[k] = s.columnDouble(10 + k);
     }
     m.merges = s.columnInt(13);
+    m.structure = s.columnInt(14) != 0;
     out.push_back(std::move(m));
   }
   OBJDB_ASSIGN_OR_RETURN(
@@ -736,8 +748,8 @@ StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
       Statement::prepare(*lease,
-                         "SELECT id, planar, num_points, num_keypoints, descriptors FROM models "
-                         "WHERE state = 'active' ORDER BY id"));
+                         "SELECT id, planar, num_points, num_keypoints, descriptors, structure "
+                         "FROM models WHERE state = 'active' ORDER BY id"));
   database::MatchEntries out;
   std::map<int64_t, size_t> slot;
   while (true) {
@@ -746,6 +758,7 @@ StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
     database::MatchEntry e;
     e.id = s.columnInt(0);
     e.planar = s.columnInt(1) != 0;
+    e.structure = s.columnInt(5) != 0;
     e.num_points = size_t(s.columnInt(2));
     e.num_keypoints = size_t(s.columnInt(3));
     auto descriptors = decodeDescriptors(s.columnBlob(4));

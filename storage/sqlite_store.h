@@ -139,6 +139,7 @@ struct ModelSummary {
   std::string state;             // "active" or "merged" (removed models are never listed)
   int64_t merged_into = 0;       // state "merged": the model that absorbed it
   bool planar = false;
+  bool structure = false;        // room structure (core/model/structure.h): never matched
   int64_t num_points = 0, num_keypoints = 0;
   double voxel_size = 0.0;
   Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero(), bbox_max = Eigen::Vector3d::Zero();  // model frame

@@ -1,5 +1,6 @@
 #include "core/common/params.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace objdb {
@@ -71,8 +72,23 @@ Status ModelParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(planar_inlier_ratio, 0.0, 1.0, "model.planar_inlier_ratio"));
   OBJDB_RETURN_IF_ERROR(
       inRange(plane_ransac_iterations, 1, 1000000, "model.plane_ransac_iterations"));
+  OBJDB_RETURN_IF_ERROR(inRange(plane_noise_sigmas, 0.0, 100.0, "model.plane_noise_sigmas"));
+  OBJDB_RETURN_IF_ERROR(inRange(noise_sigma0_m, 0.0, 1.0, "model.noise_sigma0_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(noise_sigma2_m, 0.0, 1.0, "model.noise_sigma2_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(noise_z0_m, 0.0, 10.0, "model.noise_z0_m"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(structure_min_extent_m, 0.0, 100.0, "model.structure_min_extent_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(structure_min_share, 0.0, 1.0, "model.structure_min_share"));
+  OBJDB_RETURN_IF_ERROR(inRange(structure_max_planes, 0, 10, "model.structure_max_planes"));
   OBJDB_RETURN_IF_ERROR(inRange(min_points, 1, 1 << 30, "model.min_points"));
   return inRange(cloud_spacing_m, 0.0005, 1.0, "model.cloud_spacing_m");
+}
+
+float ModelParams::planeDistance(float depth_m) const {
+  if (!(std::isfinite(depth_m) && depth_m > 0.0f)) return plane_distance_m;
+  const float dz = depth_m - noise_z0_m;
+  const float sigma = noise_sigma0_m + noise_sigma2_m * dz * dz;
+  return std::max(plane_distance_m, plane_noise_sigmas * sigma);
 }
 
 Status KeypointParams::validate() const {

@@ -52,6 +52,13 @@ void forEachField(ModelParams& p, Fn&& fn) {
   fn("plane_distance_m", p.plane_distance_m);
   fn("planar_inlier_ratio", p.planar_inlier_ratio);
   fn("plane_ransac_iterations", p.plane_ransac_iterations);
+  fn("plane_noise_sigmas", p.plane_noise_sigmas);
+  fn("noise_sigma0_m", p.noise_sigma0_m);
+  fn("noise_sigma2_m", p.noise_sigma2_m);
+  fn("noise_z0_m", p.noise_z0_m);
+  fn("structure_min_extent_m", p.structure_min_extent_m);
+  fn("structure_min_share", p.structure_min_share);
+  fn("structure_max_planes", p.structure_max_planes);
   fn("min_points", p.min_points);
   fn("cloud_spacing_m", p.cloud_spacing_m);
 }

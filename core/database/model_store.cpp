@@ -5,13 +5,14 @@
 namespace objdb::database {
 
 bool MatchEntry::matchable(const ModelParams& params) const {
-  return model::isMatchable(planar, num_points, num_keypoints, descriptors.size(), params);
+  return model::isMatchable(planar || structure, num_points, num_keypoints, descriptors.size(), params);
 }
 
 MatchEntry matchEntryOf(const model::ObjectModel& model) {
   MatchEntry e;
   e.id = model.id;
   e.planar = model.planar;
+  e.structure = model.structure;
   e.num_points = model.cloud.points.size();
   e.num_keypoints = model.keypoint_indices.size();
   e.descriptors = model.descriptors;

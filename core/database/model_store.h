@@ -33,6 +33,7 @@ struct RawSegmentRecord {
   std::shared_ptr<const tsdf::TsdfLayer> grid;
   std::vector<tsdf::VoxelIndex> voxels;  // the label's voxels, segment frame
   int64_t extraction_frame = 0;
+  float observation_depth_m = 0.0f;      // RawSegment::observation_depth_m (0: unknown)
 };
 
 // Evidence of one merge (the numbers the verification produced), persisted with it.
@@ -50,6 +51,7 @@ struct MergeRecord {
 struct MatchEntry {
   int64_t id = 0;
   bool planar = false;
+  bool structure = false;
   size_t num_points = 0;
   size_t num_keypoints = 0;
   std::vector<model::Fpfh> descriptors;

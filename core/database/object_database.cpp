@@ -44,8 +44,9 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
 ObjectDatabase::ObjectDatabase(const Params& params, ModelStore* store)
     : params_(params), store_(store) {}
 
-model::ModelBuildParams ObjectDatabase::buildParams() const {
+model::ModelBuildParams ObjectDatabase::buildParams(float observation_depth_m) const {
   model::ModelBuildParams p;
+  p.observation_depth_m = observation_depth_m;
   p.model = params_.model;
   p.keypoints = params_.keypoints;
   p.descriptors = params_.descriptors;
@@ -60,8 +61,16 @@ StatusOr<model::ObjectModel> ObjectDatabase::buildFromObservations(
   std::optional<tsdf::TsdfLayer> grid;
   std::vector<tsdf::VoxelIndex> voxels;
   absl::flat_hash_set<uint64_t> seen;
+  // The surface is judged with the noise of the depths its segments were seen from (mean of the
+  // known ones).
+  double depth_sum = 0.0;
+  int depths = 0;
   for (const auto& o : observations) {
     OBJDB_ASSIGN_OR_RETURN(auto segment, store_->rawSegment(keyOf(o)));
+    if (segment->observation_depth_m > 0.0f) {
+      depth_sum += segment->observation_depth_m;
+      ++depths;
+    }
     if (!grid) {
       OBJDB_ASSIGN_OR_RETURN(tsdf::TsdfLayer empty,
                              tsdf::TsdfLayer::create(segment->grid->voxelSize(),
@@ -76,7 +85,9 @@ StatusOr<model::ObjectModel> ObjectDatabase::buildFromObservations(
     }
   }
   OBJDB_ASSIGN_OR_RETURN(model::ObjectModel model,
-                         model::buildModel(std::move(*grid), voxels, buildParams()));
+                         model::buildModel(std::move(*grid), voxels,
+                                           buildParams(depths > 0 ? float(depth_sum / depths)
+                                                                  : 0.0f)));
   model.id = id;
   model.observations = std::move(observations);
   return model;
@@ -272,15 +283,18 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   record.grid = std::make_shared<const tsdf::TsdfLayer>(segment.grid.clone());
   record.voxels = segment.label_voxels;
   record.extraction_frame = segment.extraction_frame;
+  record.observation_depth_m = segment.observation_depth_m;
   OBJDB_RETURN_IF_ERROR(store_->putRawSegment(record));
 
   OBJDB_ASSIGN_OR_RETURN(model::ObjectModel incoming,
-                         model::buildModel(record.grid->clone(), record.voxels, buildParams()));
+                         model::buildModel(record.grid->clone(), record.voxels,
+                                           buildParams(segment.observation_depth_m)));
   incoming.observations = {{session, segment.label, segment.T_world_segment, Transform::Identity()}};
   report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
   report.timings.keypoints_ms = incoming.timings.keypoints_ms;
   report.timings.descriptors_ms = incoming.timings.descriptors_ms;
   report.planar = incoming.planar;
+  report.structure = incoming.structure;
   report.matchable = incoming.matchable(params_.model);
 
   std::vector<int64_t> candidates;

@@ -61,6 +61,7 @@ struct InsertReport {
   int64_t model_id = 0;          // the model now holding the segment
   bool merged = false;           // merged into an existing model
   bool planar = false;
+  bool structure = false;        // room structure (core/model/structure.h): never matched
   bool matchable = false;
   bool replaced_earlier = false; // the segment's key had been inserted before
   size_t candidates = 0;         // after the prefilter, readable
@@ -87,7 +88,7 @@ class ObjectDatabase {
 
  private:
   ObjectDatabase(const Params& params, ModelStore* store);
-  model::ModelBuildParams buildParams() const;
+  model::ModelBuildParams buildParams(float observation_depth_m) const;
   StatusOr<model::ObjectModel> buildFromObservations(std::vector<model::Observation> observations,
                                                      int64_t id);
   Status removeContribution(const SegmentKey& key, int64_t model_id);

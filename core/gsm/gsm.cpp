@@ -351,6 +351,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
       info.bounds.extend(bl.bounds);
     }
   }
+  camera_positions_.push_back(T_world_camera.translation().cast<float>());
   ++frame_;
   return result;
 }
@@ -455,8 +456,17 @@ std::vector<RawSegment> Gsm::extractIdle(bool flush) {
                         &voxels);
     }
     if (voxels.size() < size_t(params_.min_label_voxels)) continue;
+    const size_t last = size_t(std::max<int64_t>(info.last_update_frame, 0));
+    const Eigen::Vector3f camera =
+        last < camera_positions_.size() ? camera_positions_[last] : Eigen::Vector3f::Zero();
+    std::vector<float> depths;
+    depths.reserve(voxels.size());
+    for (const auto& v : voxels) depths.push_back((layer_.voxelCenter(v) - camera).norm());
+    std::nth_element(depths.begin(), depths.begin() + long(depths.size() / 2), depths.end());
+    const float depth = depths[depths.size() / 2];
     segments.push_back(extractRawSegment(layer_, label, std::move(voxels), margin,
                                          info.last_update_frame, frame_));
+    segments.back().observation_depth_m = last < camera_positions_.size() ? depth : 0.0f;
   }
   return segments;
 }

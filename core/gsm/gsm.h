@@ -32,6 +32,10 @@ struct RawSegment {
   std::vector<tsdf::VoxelIndex> label_voxels; // in the segment frame
   int64_t last_update_frame = 0;
   int64_t extraction_frame = 0;
+  // Median distance of its voxels from the camera of its last update, metres (0: unknown, e.g.
+  // a segment of a saved map): sets the depth noise its surface is judged with (planarity and
+  // structure, core/model/structure.h).
+  float observation_depth_m = 0.0f;
 };
 
 struct GsmFrameResult {
@@ -124,6 +128,7 @@ class Gsm {
   absl::flat_hash_map<uint64_t, PairEvidence> pair_evidence_;
   Label next_label_ = 1;
   int64_t frame_ = 0;
+  std::vector<Eigen::Vector3f> camera_positions_;  // world, one per integrated frame
   std::unique_ptr<FrameScratch> scratch_;
 };
 

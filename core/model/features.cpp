@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 
 #include "absl/container/flat_hash_map.h"
 #include "core/common/grid_key.h"
@@ -53,24 +54,51 @@ float surfaceVariation(const pcl::PointCloud<pcl::PointXYZ>& cloud,
 
 PlaneFit fitPlane(const PointCloud& cloud, float distance_m, int iterations) {
   PlaneFit fit;
-  if (cloud.points.size() < 3) return fit;
-  const auto points = toPcl(cloud);
-  // random = false: PCL seeds its generator with a constant, so the fit is deterministic.
-  auto plane = std::make_shared<pcl::SampleConsensusModelPlane<pcl::PointXYZ>>(points, false);
-  pcl::RandomSampleConsensus<pcl::PointXYZ> ransac(plane, double(distance_m));
-  ransac.setMaxIterations(iterations);
-  if (!ransac.computeModel()) return fit;
-  Eigen::VectorXf coefficients;
-  ransac.getModelCoefficients(coefficients);
-  if (coefficients.size() != 4) return fit;
-  fit.coefficients = coefficients.head<4>();
-  const float norm = fit.coefficients.head<3>().norm();
-  if (norm > 0.0f) fit.coefficients /= norm;
-  // RANSAC's consensus was counted on its best sample; count on the refined plane too.
-  std::vector<int> inliers;
-  plane->selectWithinDistance(coefficients, double(distance_m), inliers);
-  fit.inlier_ratio = float(inliers.size()) / float(cloud.points.size());
+  const std::vector<PlanePiece> planes = fitPlanes(cloud, distance_m, iterations, 1, 3);
+  if (planes.empty()) return fit;
+  fit.coefficients = planes.front().coefficients;
+  fit.inlier_ratio = float(planes.front().inliers.size()) / float(cloud.points.size());
   return fit;
+}
+
+std::vector<PlanePiece> fitPlanes(const PointCloud& cloud, float distance_m, int iterations,
+                                  int max_planes, size_t min_inliers) {
+  std::vector<PlanePiece> planes;
+  if (cloud.points.size() < 3) return planes;
+  const auto points = toPcl(cloud);
+  std::vector<int> remaining(cloud.points.size());
+  for (size_t i = 0; i < remaining.size(); ++i) remaining[i] = int(i);
+  min_inliers = std::max<size_t>(min_inliers, 3);
+  for (int p = 0; p < max_planes && remaining.size() >= min_inliers; ++p) {
+    // random = false: PCL seeds its generator with a constant, so the fit is deterministic.
+    auto plane =
+        std::make_shared<pcl::SampleConsensusModelPlane<pcl::PointXYZ>>(points, remaining, false);
+    pcl::RandomSampleConsensus<pcl::PointXYZ> ransac(plane, double(distance_m));
+    ransac.setMaxIterations(iterations);
+    if (!ransac.computeModel()) break;
+    Eigen::VectorXf coefficients;
+    ransac.getModelCoefficients(coefficients);
+    if (coefficients.size() != 4) break;
+    PlanePiece piece;
+    piece.coefficients = coefficients.head<4>();
+    const float norm = piece.coefficients.head<3>().norm();
+    if (!(norm > 0.0f)) break;
+    piece.coefficients /= norm;
+    // RANSAC's consensus was counted on its best sample; count on the fitted plane, among the
+    // points no earlier plane took.
+    std::vector<int> inliers;
+    plane->selectWithinDistance(coefficients, double(distance_m), inliers);
+    if (inliers.size() < min_inliers) break;
+    std::sort(inliers.begin(), inliers.end());
+    piece.inliers.assign(inliers.begin(), inliers.end());
+    std::vector<int> left;
+    left.reserve(remaining.size() - inliers.size());
+    std::set_difference(remaining.begin(), remaining.end(), inliers.begin(), inliers.end(),
+                        std::back_inserter(left));
+    remaining.swap(left);
+    planes.push_back(std::move(piece));
+  }
+  return planes;
 }
 
 std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointParams& params,

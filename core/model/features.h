@@ -18,6 +18,17 @@ struct PlaneFit {
 // Best plane by RANSAC (deterministic seed). Fewer than 3 points: inlier_ratio 0.
 PlaneFit fitPlane(const PointCloud& cloud, float distance_m, int iterations);
 
+// One plane of a cloud and the points within distance of it.
+struct PlanePiece {
+  Eigen::Vector4f coefficients = Eigen::Vector4f::Zero();  // n·p + d = 0, |n| = 1
+  std::vector<uint32_t> inliers;                           // indices into the cloud, ascending
+};
+// Up to `max_planes` planes, each the best RANSAC plane (deterministic seed) of the points the
+// planes before it left, with its inliers refined on the fitted plane; stops at a plane with
+// fewer than `min_inliers` points (not returned).
+std::vector<PlanePiece> fitPlanes(const PointCloud& cloud, float distance_m, int iterations,
+                                  int max_planes, size_t min_inliers);
+
 struct KeypointCounts {
   size_t iss = 0, harris = 0, both = 0;
   size_t uniform = 0;  // added by uniform_spacing_m (not already ISS or Harris3D)

@@ -7,6 +7,7 @@
 #include "absl/strings/str_format.h"
 #include "core/common/grid_key.h"
 #include "core/model/features.h"
+#include "core/model/structure.h"
 #include "core/tsdf/mesh_extraction.h"
 
 namespace objdb::model {
@@ -19,15 +20,15 @@ double msSince(Clock::time_point t) {
 
 }  // namespace
 
-bool isMatchable(bool planar, size_t num_points, size_t num_keypoints, size_t num_descriptors,
-                 const ModelParams& params) {
-  return !planar && num_points >= size_t(params.min_points) && num_keypoints >= 3 &&
+bool isMatchable(bool planar_or_structure, size_t num_points, size_t num_keypoints,
+                 size_t num_descriptors, const ModelParams& params) {
+  return !planar_or_structure && num_points >= size_t(params.min_points) && num_keypoints >= 3 &&
          num_descriptors == num_keypoints;
 }
 
 bool ObjectModel::matchable(const ModelParams& params) const {
-  return isMatchable(planar, cloud.points.size(), keypoint_indices.size(), descriptors.size(),
-                     params);
+  return isMatchable(planar || structure, cloud.points.size(), keypoint_indices.size(),
+                     descriptors.size(), params);
 }
 
 ObjectModel cloneModel(const ObjectModel& model) {
@@ -39,6 +40,7 @@ ObjectModel cloneModel(const ObjectModel& model) {
   copy.keypoint_indices = model.keypoint_indices;
   copy.descriptors = model.descriptors;
   copy.planar = model.planar;
+  copy.structure = model.structure;
   copy.plane_inlier_ratio = model.plane_inlier_ratio;
   copy.timings = model.timings;
   return copy;
@@ -154,12 +156,16 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
         voxels.size(), params.mesh_min_weight));
   }
   t = Clock::now();
-  const PlaneFit plane =
-      fitPlane(model.cloud, params.model.plane_distance_m, params.model.plane_ransac_iterations);
-  model.plane_inlier_ratio = plane.inlier_ratio;
-  model.planar = plane.inlier_ratio >= params.model.planar_inlier_ratio;
+  const SurfaceClass shape =
+      classifySurface(model.cloud, params.observation_depth_m, params.model);
+  model.plane_inlier_ratio = shape.plane_inlier_ratio;
+  model.planar = shape.planar;
+  model.structure = shape.structure;
   model.timings.planarity_ms = msSince(t);
-  if (model.planar || model.cloud.points.size() < size_t(params.model.min_points)) return model;
+  if (model.planar || model.structure ||
+      model.cloud.points.size() < size_t(params.model.min_points)) {
+    return model;
+  }
   t = Clock::now();
   model.keypoint_indices = detectKeypoints(model.cloud, params.keypoints, nullptr, params.threads);
   model.timings.keypoints_ms = msSince(t);

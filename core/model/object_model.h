@@ -50,17 +50,18 @@ struct ObjectModel {
   std::vector<uint32_t> keypoint_indices;  // into cloud.points (ISS ∪ Harris3D)
   std::vector<Fpfh> descriptors;           // one per keypoint
   bool planar = false;                     // planar segments are stored, never matched
+  bool structure = false;                  // room structure (structure.h): stored, never matched
   float plane_inlier_ratio = 0.0f;         // share of points on the best plane
   BuildTimings timings;
 
-  // Matchable: not planar, enough points, at least 3 described keypoints.
+  // Matchable: neither planar nor structure, enough points, at least 3 described keypoints.
   bool matchable(const ModelParams& params) const;
   Eigen::Vector3f keypoint(size_t k) const { return cloud.points[keypoint_indices[k]]; }
 };
 
 // The matchable rule on a model's counts (ObjectModel::matchable, the prefilter's index entries).
-bool isMatchable(bool planar, size_t num_points, size_t num_keypoints, size_t num_descriptors,
-                 const ModelParams& params);
+bool isMatchable(bool planar_or_structure, size_t num_points, size_t num_keypoints,
+                 size_t num_descriptors, const ModelParams& params);
 
 // A deep copy (models are move-only: their grid owns its blocks).
 ObjectModel cloneModel(const ObjectModel& model);
@@ -81,6 +82,9 @@ struct ModelBuildParams {
   DescriptorParams descriptors;
   float mesh_min_weight = 3.0f;  // tsdf.mesh_min_weight
   int threads = 1;               // database.threads: keypoints and descriptors on this many
+  // Depth the segment was seen from (RawSegment::observation_depth_m; 0 = unknown): the plane
+  // distance of the planarity and structure tests follows the sensor noise there.
+  float observation_depth_m = 0.0f;
 };
 
 // Builds a model from a segment's grid and the voxels carrying its label (same frame; the grid

@@ -38,7 +38,7 @@ void resize(Image<T>* image, int w, int h, T fill) {
 
 }  // namespace
 
-size_t fillDepthHoles(DepthImage* depth, int iterations) {
+size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spread) {
   const int w = depth->width, h = depth->height;
   size_t filled = 0;
   DepthImage next = *depth;
@@ -47,19 +47,22 @@ size_t fillDepthHoles(DepthImage* depth, int iterations) {
     for (int v = 1; v + 1 < h; ++v) {
       for (int u = 1; u + 1 < w; ++u) {
         if (isValidDepth(depth->at(u, v))) continue;
-        float sum = 0.0f;
+        float sum = 0.0f, lo = std::numeric_limits<float>::max(), hi = 0.0f;
         int n = 0;
         for (int dv = -1; dv <= 1; ++dv) {
           for (int du = -1; du <= 1; ++du) {
             const float d = depth->at(u + du, v + dv);
             if (isValidDepth(d)) {
               sum += d;
+              lo = std::min(lo, d);
+              hi = std::max(hi, d);
               ++n;
             }
           }
         }
-        // Only holes surrounded on most sides: never grow the image outward at its borders.
-        if (n >= 5) {
+        // Only holes surrounded on most sides (never growing the image outward at its borders)
+        // by pixels on one surface: a hole on a depth edge stays a hole.
+        if (n >= 5 && hi - lo <= max_relative_spread * lo) {
           next.at(u, v) = sum / float(n);
           ++filled_now;
         }
@@ -545,7 +548,9 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   for (float& d : depth_.data) {
     if (!isValidDepth(d)) d = 0.0f;  // NaN, inf, negative → no measurement
   }
-  if (params_.fill_holes_iterations > 0) fillDepthHoles(&depth_, params_.fill_holes_iterations);
+  if (params_.fill_holes_iterations > 0) {
+    fillDepthHoles(&depth_, params_.fill_holes_iterations, params_.discontinuity_threshold);
+  }
   for (float d : depth_.data) result.invalid_pixels += d > 0.0f ? 0 : 1;
   depthToPoints(depth_, intrinsics_, &points_);
   result.timings.points_ms = msSince(t);

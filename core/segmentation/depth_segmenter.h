@@ -26,10 +26,12 @@ using NormalImage = Image<Eigen::Vector3f>;
 using MaskImage = Image<uint8_t>;      // 0 / 1
 using LabelImage = Image<int32_t>;     // 0 = no segment
 
-// Fills holes (0 depth) of at most `max_hole_px` pixels across with the mean of the valid pixels
-// around them, in up to `iterations` passes of a 3×3 neighbourhood. Sensor dependent (paper:
-// optional); off by default. Returns the number of pixels filled.
-size_t fillDepthHoles(DepthImage* depth, int iterations);
+// Fills holes (0 depth) with the mean of the valid pixels of their 3×3 neighbourhood, when at
+// least 5 of the 8 are valid and they lie on one surface (max − min ≤ max_relative_spread · min,
+// the discontinuity test's own ratio), in up to `iterations` passes. Closes the pinholes of
+// depth registered to a larger colour image (a RealSense's grid of holes); holes on depth edges
+// stay. Returns the number of pixels filled.
+size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spread = 0.03f);
 
 // Back-projects a depth image; invalid (0, NaN, ±inf, negative) depth → point (0, 0, 0).
 void depthToPoints(const DepthImage& depth, const Intrinsics& intrinsics, PointImage* points);

@@ -466,6 +466,27 @@ TEST(SqliteStore, ReadOnlyStoresReadAndRefuseWrites) {
             absl::StatusCode::kFailedPrecondition);
 }
 
+// What a file of an older schema holds must survive its migration: a session and its scene map
+// (tables whose layout every schema since the first keeps; this build's model and raw-segment
+// writes need the current schema's columns).
+void addSessionWithScene(SqliteStore* store, const std::string& name) {
+  SessionInfo info;
+  info.name = name;
+  ASSERT_TRUE(store->beginSession(info).ok());
+  ASSERT_TRUE(store->putScene(name, std::make_shared<const tsdf::TsdfLayer>(
+                                        makeStoreModel(1, 2).grid.clone())).ok());
+}
+
+void expectSessionWithScene(const SqliteStore& store, const std::string& name) {
+  const auto sessions = store.sessions();
+  ASSERT_TRUE(sessions.ok()) << sessions.status();
+  ASSERT_EQ(sessions->size(), 1u);
+  EXPECT_EQ(sessions->front().name, name);
+  const auto scene = store.scene(name);
+  ASSERT_TRUE(scene.ok() && *scene != nullptr);
+  EXPECT_EQ((*scene)->numBlocks(), makeStoreModel(1, 2).grid.numBlocks());
+}
+
 TEST(SqliteStore, OlderSchemasAreMigratedAndAFailedMigrationChangesNothing) {
   TempDir dir;
   const auto path = (dir / "db.sqlite").string();
@@ -473,11 +494,11 @@ TEST(SqliteStore, OlderSchemasAreMigratedAndAFailedMigrationChangesNothing) {
   {
     auto store = SqliteStore::open(path, {}, v1);
     ASSERT_TRUE(store.ok()) << store.status();
-    ASSERT_TRUE((*store)->addModel(makeStoreModel(1, 2)).ok());
+    addSessionWithScene(store->get(), "monday");
   }
   // A step that fails half way rolls back: the file stays at version 1 with its data.
   std::vector<Migration> broken = v1;
-  broken.push_back({2, "broken", "ALTER TABLE models ADD COLUMN note TEXT; SELECT * FROM nowhere;"});
+  broken.push_back({2, "broken", "ALTER TABLE sessions ADD COLUMN note TEXT; SELECT * FROM nowhere;"});
   auto failed = SqliteStore::open(path, {}, broken);
   ASSERT_FALSE(failed.ok());
   EXPECT_THAT(failed.status().message(), HasSubstr("migrating to schema 2"));
@@ -485,17 +506,15 @@ TEST(SqliteStore, OlderSchemasAreMigratedAndAFailedMigrationChangesNothing) {
     auto store = SqliteStore::open(path, {}, v1);
     ASSERT_TRUE(store.ok()) << store.status();
     EXPECT_EQ((*store)->schema().version_after, 1);
-    EXPECT_EQ((*store)->modelIds().value().size(), 1u);
+    expectSessionWithScene(**store, "monday");
   }
   std::vector<Migration> v2 = v1;
-  v2.push_back({2, "model notes", "ALTER TABLE models ADD COLUMN note TEXT NOT NULL DEFAULT '';"});
+  v2.push_back({2, "session notes", "ALTER TABLE sessions ADD COLUMN note TEXT NOT NULL DEFAULT '';"});
   auto migrated = SqliteStore::open(path, {}, v2);
   ASSERT_TRUE(migrated.ok()) << migrated.status();
   EXPECT_EQ((*migrated)->schema().version_before, 1);
   EXPECT_EQ((*migrated)->schema().version_after, 2);
-  model::ObjectModel expected = makeStoreModel(1, 2);
-  expected.id = 1;
-  EXPECT_EQ(diffModels(*(*migrated)->model(1).value(), expected), "");
+  expectSessionWithScene(**migrated, "monday");
 }
 
 // One writer per file (the server and `objdb ingest` keep in-memory copies of what the file
@@ -522,26 +541,38 @@ TEST(SqliteStore, ASecondWriterOnTheSameFileIsRefusedUntilTheFirstCloses) {
   EXPECT_TRUE((*after)->addModel(makeStoreModel(2, 1)).ok());
 }
 
-// This build's own migrations: a file of schema 1 (before saved live maps) opens as the current
-// schema with its models, and takes scenes and saved maps.
+// This build's own migrations: a file of schema 1 (before saved live maps and room structure)
+// opens as the current schema with its sessions and scenes, and takes models (structure
+// flag and observation depth round-trip), raw segments and saved maps.
 TEST(SqliteStore, AFileOfTheFirstSchemaIsMigratedToTheCurrentOne) {
   TempDir dir;
   const auto path = (dir / "db.sqlite").string();
   {
     auto store = SqliteStore::open(path, {}, {schemaMigrations().front()});
     ASSERT_TRUE(store.ok()) << store.status();
-    ASSERT_TRUE((*store)->addModel(makeStoreModel(1, 2)).ok());
+    addSessionWithScene(store->get(), "s");
   }
   auto store = SqliteStore::open(path);
   ASSERT_TRUE(store.ok()) << store.status();
   EXPECT_EQ((*store)->schema().version_before, 1);
   EXPECT_EQ((*store)->schema().version_after, currentSchemaVersion());
-  model::ObjectModel expected = makeStoreModel(1, 2);
-  expected.id = 1;
-  EXPECT_EQ(diffModels(*(*store)->model(1).value(), expected), "");
-  const tsdf::TsdfLayer& map = expected.grid;
-  ASSERT_TRUE((*store)->putScene("s", std::make_shared<const tsdf::TsdfLayer>(map.clone())).ok());
-  ASSERT_TRUE((*store)->putSavedMap("s", 3, map, {}).ok());
+  expectSessionWithScene(**store, "s");
+  model::ObjectModel structure = makeStoreModel(1, 2);
+  structure.structure = true;
+  const auto id = (*store)->addModel(makeStoreModel(1, 2));
+  const auto wall = (*store)->addModel(std::move(structure));
+  ASSERT_TRUE(id.ok() && wall.ok());
+  EXPECT_FALSE((*store)->model(*id).value()->structure);
+  EXPECT_TRUE((*store)->model(*wall).value()->structure);
+  database::RawSegmentRecord segment;
+  segment.key = {"s", 4};
+  segment.grid = std::make_shared<const tsdf::TsdfLayer>(makeStoreModel(1, 2).grid.clone());
+  segment.voxels = {tsdf::VoxelIndex(1, 2, 3)};
+  segment.observation_depth_m = 2.75f;
+  ASSERT_TRUE((*store)->putRawSegment(segment).ok());
+  EXPECT_FLOAT_EQ((*store)->rawSegment({"s", 4}).value()->observation_depth_m, 2.75f);
+  const model::ObjectModel source = makeStoreModel(1, 2);
+  ASSERT_TRUE((*store)->putSavedMap("s", 3, source.grid, {}).ok());
   EXPECT_EQ((*store)->savedMap("s").value().frames, 3);
   EXPECT_TRUE((*store)->check().value().ok());
 }

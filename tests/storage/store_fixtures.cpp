@@ -115,6 +115,7 @@ std::string diffModels(const model::ObjectModel& a, const model::ObjectModel& b)
   if (a.keypoint_indices != b.keypoint_indices) return "keypoints differ";
   if (a.descriptors != b.descriptors) return "descriptors differ";
   if (a.planar != b.planar || a.plane_inlier_ratio != b.plane_inlier_ratio) return "planarity differs";
+  if (a.structure != b.structure) return "structure differs";
   if (a.timings.cloud_ms != b.timings.cloud_ms || a.timings.descriptors_ms != b.timings.descriptors_ms) {
     return "timings differ";
   }

@@ -126,6 +126,52 @@ TEST(ObjectDatabase, PlanarSegmentsAreStoredButNeverMatched) {
   EXPECT_EQ(f.store.modelIds().value().size(), 2u);
 }
 
+// A 2.4 x 1.6 m wall seen from 3 m, with a shelf and two boxes on it, its distances perturbed by
+// the sensor's axial noise there (σ(3 m) = 1.4 cm): structure, stored, never a candidate.
+gsm::RawSegment wallWithShelf(uint32_t label, float seed) {
+  const Sdf wall = objdb::testing::unionSdf(
+      {boxSdf({0, 0.05f, 0.8f}, {1.2f, 0.05f, 0.8f}), boxSdf({0, -0.15f, 0.8f}, {0.6f, 0.15f, 0.02f}),
+       boxSdf({-0.3f, -0.15f, 0.92f}, {0.1f, 0.1f, 0.1f}), boxSdf({0.3f, -0.15f, 0.92f}, {0.1f, 0.1f, 0.1f})});
+  const float sigma = 0.0012f + 0.0019f * 2.6f * 2.6f;
+  const Sdf noisy = [&wall, sigma, seed](const Eigen::Vector3f& p) {
+    // A smooth pseudo-random field of standard deviation about σ (no two walls alike).
+    const float n = std::sin(37.0f * p.x() + seed) * std::cos(41.0f * p.z() - seed) +
+                    std::sin(53.0f * (p.x() + p.z()) + 2.0f * seed);
+    return wall(p) + sigma * 0.8f * n;
+  };
+  auto grid = sdfGrid(noisy, Eigen::Vector3f(-1.3f, -0.4f, -0.1f), Eigen::Vector3f(1.3f, 0.2f, 1.7f),
+                      kVoxel, kBand);
+  gsm::RawSegment raw{label, Transform::Identity(), std::move(grid.layer), {}, 0, 0};
+  for (const auto& v : grid.surface_voxels) {
+    if (raw.grid.voxelCenter(v).y() < 0.02f) raw.label_voxels.push_back(v);  // the seen side
+  }
+  raw.observation_depth_m = 3.0f;
+  return raw;
+}
+
+TEST(ObjectDatabase, StructureSegmentsAreStoredAsSuchButNeverMatched) {
+  Fixture f;
+  auto a = f.db->insertSegment("s", wallWithShelf(1, 0.0f));
+  auto b = f.db->insertSegment("t", wallWithShelf(1, 1.0f));
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status() << b.status();
+  EXPECT_TRUE(a->structure);
+  EXPECT_FALSE(a->planar);  // the shelf and the boxes stick out of the wall's plane
+  EXPECT_FALSE(a->matchable);
+  EXPECT_TRUE(b->structure);
+  EXPECT_EQ(b->candidates, 0u);
+  EXPECT_FALSE(b->merged);
+  ASSERT_EQ(f.store.modelIds().value().size(), 2u);
+  EXPECT_TRUE(f.store.model(f.store.modelIds().value()[0]).value()->structure);
+  // Without the structure rule the same wall is an object with keypoints: a match candidate.
+  Params no_rule = params();
+  no_rule.model.structure_max_planes = 0;
+  Fixture g(no_rule);
+  auto c = g.db->insertSegment("s", wallWithShelf(1, 0.0f));
+  ASSERT_TRUE(c.ok());
+  EXPECT_FALSE(c->structure);
+  EXPECT_TRUE(c->matchable);
+}
+
 TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
   Fixture f;
   const World& a = kMonday;

@@ -567,6 +567,25 @@ TEST(FillDepthHoles, FillsASmallHoleWithItsNeighboursDepthAndKeepsTheBorder) {
   EXPECT_EQ(depth.at(0, 5), 0.0f);
 }
 
+TEST(FillDepthHoles, ClosesAGridOfPinholesButNotAHoleOnADepthEdge) {
+  // Every other pixel of every other row missing (depth registered to a larger colour image).
+  DepthImage grid(16, 16, 2.0f);
+  for (int v = 1; v < 16; v += 2) {
+    for (int u = 1; u < 16; u += 2) grid.at(u, v) = 0.0f;
+  }
+  EXPECT_EQ(fillDepthHoles(&grid, 1), 49u);  // the 7 x 7 inside the border
+  EXPECT_FLOAT_EQ(grid.at(7, 7), 2.0f);
+  // A hole between a surface at 1 m and one at 2 m: its neighbours disagree by far more than the
+  // 3 % of a surface, so it stays (averaging would put a point in mid-air).
+  DepthImage edge(10, 10, 1.0f);
+  for (int v = 0; v < 10; ++v) {
+    for (int u = 5; u < 10; ++u) edge.at(u, v) = 2.0f;
+  }
+  edge.at(5, 5) = 0.0f;
+  EXPECT_EQ(fillDepthHoles(&edge, 3), 0u);
+  EXPECT_EQ(edge.at(5, 5), 0.0f);
+}
+
 // --- Minimum segment size ------------------------------------------------------------------------
 
 TEST(DepthSegmenter, RegionSmallerThanTheMinimumIsDroppedAndCounted) {
@@ -663,7 +682,10 @@ TEST(DepthSegmenter, NonFiniteAndNegativeDepthsAreInvalidPixels) {
       d = bad_values[size_t(u - 100) / 50];
     }
   }
-  DepthSegmenter segmenter = makeSegmenter(k);
+  // Hole filling off: the scattered bad pixels would be filled from their neighbours.
+  SegmentationParams no_fill;
+  no_fill.fill_holes_iterations = 0;
+  DepthSegmenter segmenter = makeSegmenter(k, no_fill);
   StatusOr<SegmentationResult> result = segmenter.segment(frame.depth, &frame.color);
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(result->invalid_pixels, n_bad);
