@@ -15,5 +15,6 @@ int runDbCommand(int argc, char** argv);      // db_command.cpp
 int runIngestCommand(int argc, char** argv);  // ingest_command.cpp
 int runStreamCommand(int argc, char** argv);  // stream_command.cpp
 int runRemoteCommand(int argc, char** argv);  // remote_command.cpp
+int runReportCommand(int argc, char** argv);  // report_command.cpp
 
 }  // namespace objdb

@@ -10,6 +10,7 @@
 #include "absl/strings/str_format.h"
 #include "core/common/grid_key.h"
 #include "core/common/logging.h"
+#include "core/model/structure.h"
 
 namespace objdb::database {
 namespace {
@@ -91,6 +92,35 @@ StatusOr<model::ObjectModel> ObjectDatabase::buildFromObservations(
   model.id = id;
   model.observations = std::move(observations);
   return model;
+}
+
+StatusOr<float> ObjectDatabase::growInScene(const std::string& session,
+                                            const model::ObjectModel& incoming,
+                                            const LiveScenes& live) {
+  const ModelParams& p = params_.model;
+  if (p.structure_max_planes <= 0 || incoming.plane_inlier_ratio < p.structure_min_share ||
+      incoming.observations.empty()) {
+    return 0.0f;
+  }
+  std::shared_ptr<const tsdf::TsdfLayer> scene = live ? live(session) : nullptr;
+  if (scene == nullptr) {
+    OBJDB_ASSIGN_OR_RETURN(scene, store_->scene(session));
+  }
+  if (scene == nullptr) return 0.0f;  // no scene yet: the segment's own planes decided
+  const Eigen::Isometry3f T = incoming.observations.front().T_world_object.cast<float>();
+  const Eigen::Vector3f n = T.linear() * incoming.plane.head<3>();
+  const Eigen::Vector4f plane_world(n.x(), n.y(), n.z(),
+                                    incoming.plane.w() - n.dot(T.translation()));
+  std::vector<Eigen::Vector3f> seeds;
+  for (const auto& q : incoming.cloud.points) {
+    if (std::abs(incoming.plane.head<3>().dot(q) + incoming.plane.w()) <=
+        incoming.plane_distance_m) {
+      seeds.push_back(T * q);
+    }
+  }
+  const model::GrownPlane grown =
+      model::growPlaneInScene(*scene, plane_world, seeds, incoming.plane_distance_m);
+  return grown.span_m[0];
 }
 
 Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_id) {
@@ -293,9 +323,24 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
   report.timings.keypoints_ms = incoming.timings.keypoints_ms;
   report.timings.descriptors_ms = incoming.timings.descriptors_ms;
+  if (!incoming.structure) {
+    // A piece of a bigger face (a partition's top, a strip of wall) is structure too: its plane,
+    // grown through the session's scene, is bigger than an object can be.
+    const auto t = Clock::now();
+    OBJDB_ASSIGN_OR_RETURN(report.grown_plane_span_m, growInScene(session, incoming, live));
+    incoming.structure = report.grown_plane_span_m >= params_.model.structure_min_extent_m;
+    report.timings.cloud_ms += msSince(t);  // part of P: the planarity and structure tests
+  }
   report.planar = incoming.planar;
   report.structure = incoming.structure;
   report.matchable = incoming.matchable(params_.model);
+  logger("database")->debug(
+      "segment {}/{}: {} points seen from {:.2f} m, {:.0f} % on one plane (within {:.1f} cm), "
+      "grown through the scene to {:.2f} m: {}",
+      session, segment.label, incoming.cloud.points.size(), segment.observation_depth_m,
+      100.0 * incoming.plane_inlier_ratio, 100.0 * incoming.plane_distance_m,
+      report.grown_plane_span_m,
+      incoming.structure ? "structure" : incoming.planar ? "planar" : "object");
 
   std::vector<int64_t> candidates;
   std::vector<std::shared_ptr<const model::ObjectModel>> loaded;

@@ -62,6 +62,9 @@ struct InsertReport {
   bool merged = false;           // merged into an existing model
   bool planar = false;
   bool structure = false;        // room structure (core/model/structure.h): never matched
+  // The smaller in-plane span of the segment's best plane grown through its session's scene
+  // (0: not grown: structure already, too little of it on one plane, or no scene).
+  float grown_plane_span_m = 0.0f;
   bool matchable = false;
   bool replaced_earlier = false; // the segment's key had been inserted before
   size_t candidates = 0;         // after the prefilter, readable
@@ -92,6 +95,9 @@ class ObjectDatabase {
   StatusOr<model::ObjectModel> buildFromObservations(std::vector<model::Observation> observations,
                                                      int64_t id);
   Status removeContribution(const SegmentKey& key, int64_t model_id);
+  // The smaller span of `incoming`'s best plane grown through `session`'s scene (live first).
+  StatusOr<float> growInScene(const std::string& session, const model::ObjectModel& incoming,
+                              const LiveScenes& live);
   CandidateResult evaluate(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
                            const LiveScenes& live, InsertTimings* timings);
   std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);

@@ -159,6 +159,8 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
   const SurfaceClass shape =
       classifySurface(model.cloud, params.observation_depth_m, params.model);
   model.plane_inlier_ratio = shape.plane_inlier_ratio;
+  model.plane = shape.plane;
+  model.plane_distance_m = shape.plane_distance_m;
   model.planar = shape.planar;
   model.structure = shape.structure;
   model.timings.planarity_ms = msSince(t);

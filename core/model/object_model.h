@@ -52,6 +52,8 @@ struct ObjectModel {
   bool planar = false;                     // planar segments are stored, never matched
   bool structure = false;                  // room structure (structure.h): stored, never matched
   float plane_inlier_ratio = 0.0f;         // share of points on the best plane
+  Eigen::Vector4f plane = Eigen::Vector4f::Zero();  // that plane (model frame; not stored)
+  float plane_distance_m = 0.0f;           // the inlier distance it was found with (not stored)
   BuildTimings timings;
 
   // Matchable: neither planar nor structure, enough points, at least 3 described keypoints.

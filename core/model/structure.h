@@ -8,9 +8,13 @@
 #pragma once
 
 #include <string>
+#include <vector>
+
+#include <Eigen/Core>
 
 #include "core/common/mesh.h"
 #include "core/common/params.h"
+#include "core/tsdf/tsdf_layer.h"
 
 namespace objdb::model {
 
@@ -24,9 +28,25 @@ struct SurfaceClass {
   float structure_share = 0.0f;
   float structure_span_m[2] = {0.0f, 0.0f};
   int planes = 0;                  // planes found (at most structure_max_planes)
+  // The best plane (n·p + d = 0, |n| = 1, the cloud's frame), for growing it through the scene.
+  Eigen::Vector4f plane = Eigen::Vector4f::Zero();
 };
 
 // Classifies a surface cloud seen from `depth_m` (0 = unknown: the plane_distance_m floor).
 SurfaceClass classifySurface(const PointCloud& cloud, float depth_m, const ModelParams& params);
+
+// The segment's best plane grown through the scene: from the scene's surface voxels under
+// `seeds` (world points on the plane), every 26-connected surface voxel (|distance| ≤ half a
+// voxel, observed) within `distance_m` + half a voxel of the plane, up to `max_voxels`. Returns
+// its in-plane spans (5th to 95th percentile along its principal axes, smaller first). A piece of
+// a partition or a wall that segmentation cut out grows to the whole face; a chair's seat stops
+// at its own edges.
+struct GrownPlane {
+  size_t voxels = 0;
+  float span_m[2] = {0.0f, 0.0f};
+};
+GrownPlane growPlaneInScene(const tsdf::TsdfLayer& scene, const Eigen::Vector4f& plane_world,
+                            const std::vector<Eigen::Vector3f>& seeds, float distance_m,
+                            size_t max_voxels = 400000);
 
 }  // namespace objdb::model

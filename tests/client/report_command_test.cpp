@@ -1,0 +1,68 @@
+// `objdb report merges`: two sessions of the same two-box scene, ingested into one file, give a
+// sheet with one row per merged model (both boxes), each placement found in its session's frames;
+// bad arguments and missing inputs are clear errors.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "tests/support/subprocess.h"
+#include "tests/support/temp_dir.h"
+
+namespace objdb {
+namespace {
+
+using testing::ProcessResult;
+using testing::runProcess;
+namespace fs = std::filesystem;
+
+const std::string kObjdb = OBJDB_CLIENT_BINARY;
+
+TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
+  testing::TempDir dir;
+  const fs::path sessions = dir / "sessions";
+  ProcessResult r = runProcess({kObjdb, "sim", "--preset", "two-boxes", "--frames", "20",
+                                "--camera", "tango", "--out", (sessions / "monday").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  fs::copy(sessions / "monday", sessions / "tuesday", fs::copy_options::recursive);
+  const fs::path db = dir / "objects.sqlite";
+  r = runProcess({kObjdb, "ingest", "--db", db.string(), sessions.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  const fs::path sheet = dir / "merges.png";
+  r = runProcess({kObjdb, "report", "merges", "--db", db.string(), "--out", sheet.string(),
+                  (sessions / "monday").string(), "tuesday=" + (sessions / "tuesday").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.out.find("2 models drawn"), std::string::npos) << r.out;
+  EXPECT_NE(r.err.find("session monday: 20 frames"), std::string::npos) << r.err;
+  const cv::Mat image = cv::imread(sheet.string());
+  ASSERT_FALSE(image.empty());
+  EXPECT_EQ(image.rows, 40 + 2 * 240);  // a title line and two rows
+  EXPECT_EQ(image.cols, 380 + 240 + 5 * 320);
+  // Each placement tile holds drawn points (bright pixels over the dimmed image): the first tile
+  // of the first row is not just the dimmed frame.
+  const cv::Mat tile = image(cv::Rect(380 + 240, 40, 320, 240));
+  double brightest = 0;
+  cv::minMaxLoc(tile.reshape(1), nullptr, &brightest);
+  EXPECT_GT(brightest, 200);
+}
+
+TEST(ReportCommand, BadArgumentsAndMissingInputsAreClearErrors) {
+  testing::TempDir dir;
+  ProcessResult r = runProcess({kObjdb, "report", "merges", "--out", (dir / "s.png").string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--db and --out are required"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "report", "splits"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("unknown report \"splits\""), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "report", "merges", "--db", (dir / "none.sqlite").string(), "--out",
+                  (dir / "s.png").string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("none.sqlite"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "report", "merges", "--max-rows", "0"});
+  EXPECT_EQ(r.exit_code, 2);
+}
+
+}  // namespace
+}  // namespace objdb
