@@ -46,6 +46,37 @@ TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
   double brightest = 0;
   cv::minMaxLoc(tile.reshape(1), nullptr, &brightest);
   EXPECT_GT(brightest, 200);
+
+  // Scored against the sessions' ground truth: both boxes merged across the sessions, nothing
+  // else, the floor planar.
+  r = runProcess({kObjdb, "report", "truth", "--db", db.string(), (sessions / "monday").string(),
+                  (sessions / "tuesday").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  auto row = [&](const std::string& what) {
+    const size_t at = r.out.find(what);
+    if (at == std::string::npos) return std::string("(missing)");
+    const size_t end = r.out.find('\n', at);
+    return r.out.substr(at + what.size(), end - at - what.size());
+  };
+  EXPECT_EQ(std::stoi(row("models from >= 2 segments")), 2) << r.out;
+  EXPECT_EQ(std::stoi(row("erroneous merges (kinds differ)")), 0) << r.out;
+  EXPECT_NE(row("repeated kinds' mergeable segments with their kind").find("100 % (4 of 4)"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("large_box"), std::string::npos) << r.out;
+}
+
+TEST(ReportCommand, TruthNeedsGroundTruth) {
+  testing::TempDir dir;
+  const fs::path plain = dir / "plain";
+  ProcessResult r = runProcess({kObjdb, "sim", "--preset", "two-boxes", "--frames", "3",
+                                "--camera", "tango", "--out", plain.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  fs::remove_all(plain / "instances");
+  r = runProcess({kObjdb, "report", "truth", "--db", (dir / "none.sqlite").string(),
+                  plain.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("has no ground truth"), std::string::npos) << r.err;
 }
 
 TEST(ReportCommand, BadArgumentsAndMissingInputsAreClearErrors) {
