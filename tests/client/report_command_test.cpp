@@ -60,7 +60,7 @@ TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
   };
   EXPECT_EQ(std::stoi(row("models from >= 2 segments")), 2) << r.out;
   EXPECT_EQ(std::stoi(row("erroneous merges (kinds differ)")), 0) << r.out;
-  EXPECT_NE(row("repeated kinds' mergeable segments with their kind").find("100 % (4 of 4)"),
+  EXPECT_NE(row("repeated kinds' mergeable segments with their kind elsewhere").find("100 % (4 of 4)"),
             std::string::npos)
       << r.out;
   EXPECT_NE(r.out.find("large_box"), std::string::npos) << r.out;
