@@ -74,6 +74,12 @@ struct Placement {
   std::map<int, size_t> votes;  // ground-truth instance id → points on it, over all frames
 };
 
+// Two placements of one session within 5 cm: one surface under two GSM labels, not two objects.
+bool samePlace(const Placement& a, const Placement& b) {
+  return a.session == b.session &&
+         (a.T_world_object.translation() - b.T_world_object.translation()).norm() < 0.05;
+}
+
 struct Row {
   storage::ModelSummary summary;
   std::vector<Eigen::Vector3f> points;  // model frame, at most kMaxPoints
@@ -337,9 +343,7 @@ int merges(int argc, char** argv) {
       // Two placements of one session at one place: one surface under two GSM labels, not two
       // objects.
       for (size_t e = 0; e < t; ++e) {
-        const Placement& q = row.placements[e];
-        if (q.session == p.session &&
-            (q.T_world_object.translation() - p.T_world_object.translation()).norm() < 0.05) {
+        if (samePlace(row.placements[e], p)) {
           text(&tile, absl::StrFormat("same place as placement %d", e + 1), 6, 34, 0.42,
                cv::Scalar(80, 200, 255));
           break;
@@ -482,12 +486,7 @@ int truth(int argc, char** argv) {
       // (the same object re-segmented) is not a repeated object found.
       for (size_t b = 0; b < truths[r].size(); ++b) {
         if (b == a || truths[r][b].kind != t.kind) continue;
-        const Placement& pa = row.placements[a];
-        const Placement& pb = row.placements[b];
-        if (pa.session == pb.session &&
-            (pa.T_world_object.translation() - pb.T_world_object.translation()).norm() < 0.05) {
-          continue;
-        }
+        if (samePlace(row.placements[a], row.placements[b])) continue;
         ++with_kind;
         break;
       }

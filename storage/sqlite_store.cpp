@@ -799,12 +799,10 @@ StatusOr<std::vector<database::MergeRecord>> SqliteStore::readMergeRecords(
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
-      Statement::prepare(*lease,
-                         target ? "SELECT id, target, source, transform, icp_rmse_m, tsdf_rmse_m, "
-                                  "tsdf_overlap, scene_checks FROM merge_records WHERE target = ? "
-                                  "ORDER BY id"
-                                : "SELECT id, target, source, transform, icp_rmse_m, tsdf_rmse_m, "
-                                  "tsdf_overlap, scene_checks FROM merge_records ORDER BY id"));
+      Statement::prepare(*lease, absl::StrFormat("SELECT id, target, source, transform, "
+                                                 "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
+                                                 "scene_checks FROM merge_records %s ORDER BY id",
+                                                 target ? "WHERE target = ?" : "")));
   if (target) s.bind(1, *target);
   std::vector<database::MergeRecord> records;
   while (true) {

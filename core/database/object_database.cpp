@@ -94,6 +94,14 @@ StatusOr<model::ObjectModel> ObjectDatabase::buildFromObservations(
   return model;
 }
 
+StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> ObjectDatabase::sceneOf(
+    const std::string& session, const LiveScenes& live) const {
+  if (live) {
+    if (std::shared_ptr<const tsdf::TsdfLayer> scene = live(session)) return scene;
+  }
+  return store_->scene(session);
+}
+
 StatusOr<float> ObjectDatabase::growInScene(const std::string& session,
                                             const model::ObjectModel& incoming,
                                             const LiveScenes& live) {
@@ -102,10 +110,8 @@ StatusOr<float> ObjectDatabase::growInScene(const std::string& session,
       incoming.observations.empty()) {
     return 0.0f;
   }
-  std::shared_ptr<const tsdf::TsdfLayer> scene = live ? live(session) : nullptr;
-  if (scene == nullptr) {
-    OBJDB_ASSIGN_OR_RETURN(scene, store_->scene(session));
-  }
+  OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const tsdf::TsdfLayer> scene,
+                         sceneOf(session, live));
   if (scene == nullptr) return 0.0f;  // no scene yet: the segment's own planes decided
   const Eigen::Isometry3f T = incoming.observations.front().T_world_object.cast<float>();
   const Eigen::Vector3f n = T.linear() * incoming.plane.head<3>();
@@ -248,18 +254,15 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
     poses.emplace_back(o.session, o.T_world_object * T_i_j);
   }
   for (const auto& [session, T_world_object] : poses) {
-    std::shared_ptr<const tsdf::TsdfLayer> scene = live ? live(session) : nullptr;
-    if (scene == nullptr) {
-      auto stored_scene = store_->scene(session);
-      if (!stored_scene.ok()) {
-        result.stage = "scene";
-        result.reason = absl::StrFormat("scene of session %s unreadable: %s", session,
-                                        stored_scene.status().message());
-        timings->scene_verify_ms += msSince(t);
-        return result;
-      }
-      scene = *std::move(stored_scene);
+    auto found = sceneOf(session, live);
+    if (!found.ok()) {
+      result.stage = "scene";
+      result.reason = absl::StrFormat("scene of session %s unreadable: %s", session,
+                                      found.status().message());
+      timings->scene_verify_ms += msSince(t);
+      return result;
     }
+    const std::shared_ptr<const tsdf::TsdfLayer> scene = *std::move(found);
     if (scene == nullptr) {
       ++result.scenes_missing;
       result.stage = "scene";

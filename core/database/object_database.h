@@ -95,6 +95,9 @@ class ObjectDatabase {
   StatusOr<model::ObjectModel> buildFromObservations(std::vector<model::Observation> observations,
                                                      int64_t id);
   Status removeContribution(const SegmentKey& key, int64_t model_id);
+  // The scene map of `session`: the live one when `live` has it, else the store's (null: none).
+  StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> sceneOf(const std::string& session,
+                                                           const LiveScenes& live) const;
   // The smaller span of `incoming`'s best plane grown through `session`'s scene (live first).
   StatusOr<float> growInScene(const std::string& session, const model::ObjectModel& incoming,
                               const LiveScenes& live);
