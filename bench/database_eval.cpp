@@ -1,3 +1,4 @@
+// NOT the server's protocol (that is `objdb eval`): scenes first, a label's last extraction only.
 // The paper's experiment (§IV, tables II–III) on the synthetic lounge, offline: the three
 // sessions run through segmentation → GSM → object database with ground-truth poses, and the
 // database is scored against the ground truth: raw segments, mergeable (non-planar) segments,
@@ -169,12 +170,14 @@ int main(int argc, char** argv) {
       const auto seg = segmenter.segment(f.depth).value();
       (void)map.integrate(f.depth, seg.labels, f.T_world_camera).value();
       for (auto& s : map.extractIdle()) extracted.insert_or_assign(s.label, std::move(s));
+      for (const gsm::Label gone : map.takeWithdrawn()) extracted.erase(gone);  // merged away
       bench::forEachInstancePoint(f, scene.intrinsics, params.tsdf.max_ray_length_m,
                                   [&](const Eigen::Vector3f& p, uint16_t id) {
                                     ++truth[packGridKey(map.tsdf().voxelIndexOf(p))][id];
                                   });
     }
     for (auto& s : map.extractIdle(true)) extracted.insert_or_assign(s.label, std::move(s));
+    for (const gsm::Label gone : map.takeWithdrawn()) extracted.erase(gone);
     gsm_seconds += secondsSince(t_gsm);
     const Status stored = store.putScene(scene.name, std::make_shared<tsdf::TsdfLayer>(map.tsdf().clone()));
     if (!stored.ok()) {
@@ -300,14 +303,7 @@ int main(int argc, char** argv) {
       planar += report->planar ? 1 : 0;
       mergeable += report->matchable ? 1 : 0;
       session_merges += report->merged ? 1 : 0;
-      const auto& tm = report->timings;
-      sum.cloud_ms += tm.cloud_ms;
-      sum.keypoints_ms += tm.keypoints_ms;
-      sum.descriptors_ms += tm.descriptors_ms;
-      sum.match_register_ms += tm.match_register_ms;
-      sum.model_verify_ms += tm.model_verify_ms;
-      sum.scene_verify_ms += tm.scene_verify_ms;
-      sum.total_ms += tm.total_ms;
+      sum += report->timings;
     }
     std::printf("%s: %zu raw segments, %zu merged into earlier models, %zu models so far "
                 "(%.1f s since start)\n",

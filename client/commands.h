@@ -16,5 +16,6 @@ int runIngestCommand(int argc, char** argv);  // ingest_command.cpp
 int runStreamCommand(int argc, char** argv);  // stream_command.cpp
 int runRemoteCommand(int argc, char** argv);  // remote_command.cpp
 int runReportCommand(int argc, char** argv);  // report_command.cpp
+int runEvalCommand(int argc, char** argv);    // eval_command.cpp
 
 }  // namespace objdb

@@ -28,12 +28,14 @@ StatusOr<FrameLoopStats> segmentAndFuse(const io::Dataset& ds,
       stats.segmentation_ms += seg->timings.total_ms;
       stats.fusion_ms += fused->tsdf.milliseconds;
       stats.merges += fused->merges;
-      OBJDB_RETURN_IF_ERROR(sink(map->extractIdle()));
+      std::vector<gsm::RawSegment> segments = map->extractIdle();
+      OBJDB_RETURN_IF_ERROR(sink(std::move(segments), map->takeWithdrawn()));
     }
     bar.update(stats.used + stats.rejected);
   }
   bar.finish();
-  OBJDB_RETURN_IF_ERROR(sink(map->extractIdle(true)));
+  std::vector<gsm::RawSegment> segments = map->extractIdle(true);
+  OBJDB_RETURN_IF_ERROR(sink(std::move(segments), map->takeWithdrawn()));
   return stats;
 }
 

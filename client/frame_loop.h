@@ -20,7 +20,10 @@ struct FrameLoopStats {
   double segmentation_ms = 0, fusion_ms = 0;  // summed over used frames
 };
 
-using SegmentSink = std::function<Status(std::vector<gsm::RawSegment> segments)>;
+// Segments extracted after a frame, and the labels the GSM withdrew (gsm::Gsm::takeWithdrawn:
+// merged into another label; whoever kept their earlier segments drops them).
+using SegmentSink =
+    std::function<Status(std::vector<gsm::RawSegment> segments, std::vector<gsm::Label> withdrawn)>;
 
 // Errors: a frame that cannot be loaded, or the sink's error (the loop stops there).
 StatusOr<FrameLoopStats> segmentAndFuse(const io::Dataset& dataset,

@@ -82,7 +82,8 @@ int runGsmCommand(int argc, char** argv) {
   }
 
   size_t extracted = 0;
-  auto write_segments = [&](std::vector<gsm::RawSegment> segments) -> Status {
+  auto write_segments = [&](std::vector<gsm::RawSegment> segments,
+                            std::vector<gsm::Label> /*withdrawn: files already written stay*/) -> Status {
     for (auto& segment : segments) {
       ++extracted;
       if (segments_out.empty()) continue;

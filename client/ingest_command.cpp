@@ -123,8 +123,13 @@ int runIngestCommand(int argc, char** argv) {
       return cli::reportError(kCommand, begun.status());
     }
     std::printf("session %s: %zu frames from %s\n", name.c_str(), ds.size(), path.c_str());
-    size_t inserted = 0, merged = 0, skipped = 0;
-    auto insert = [&](std::vector<gsm::RawSegment> segments) -> Status {
+    size_t inserted = 0, merged = 0, skipped = 0, withdrawn_count = 0;
+    auto insert = [&](std::vector<gsm::RawSegment> segments,
+                      std::vector<gsm::Label> withdrawn) -> Status {
+      for (const gsm::Label label : withdrawn) {  // before the survivors' new segments
+        OBJDB_ASSIGN_OR_RETURN(const int64_t model, (*db)->withdrawSegment(name, label));
+        withdrawn_count += model != 0 ? 1 : 0;
+      }
       if (segments.empty()) return absl::OkStatus();
       // The session's scene is stored at its end: until then its poses are verified against the
       // map as it is now (as the server does).
@@ -164,8 +169,8 @@ int runIngestCommand(int argc, char** argv) {
     if (!finished.ok()) return cli::reportError(kCommand, finished);
     const auto ids = (*store)->modelIds();
     std::printf("  %zu frames (%zu skipped), %zu raw segments inserted (%zu merged into earlier "
-                "models, %zu without surface skipped); %zu models in the database\n",
-                looped->used, looped->rejected, inserted, merged, skipped,
+                "models, %zu without surface skipped, %zu withdrawn); %zu models in the database\n",
+                looped->used, looped->rejected, inserted, merged, skipped, withdrawn_count,
                 ids.ok() ? ids->size() : size_t(0));
   }
   if (Status s = (*store)->checkpoint(); !s.ok()) return cli::reportError(kCommand, s);

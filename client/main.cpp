@@ -22,7 +22,9 @@ commands:
   db       check, describe and export from a database file (read-only)
   stream   stream datasets to an objdb server (one Ingest stream per session, then EndSession)
   remote   ask an objdb server: stats, sessions, objects, an object's mesh, a scene's mesh
-  report   merges: a PNG sheet of every multi-segment model over the camera images
+  report   merges: a PNG sheet of every multi-segment model over the camera images; truth:
+           a database scored against the datasets' ground truth
+  eval     run datasets through an in-process server on a new database and score it
   help     show this text
 
 Run "objdb <command> --help" for the options of a command.
@@ -51,6 +53,7 @@ int main(int argc, char** argv) {
   if (command == "stream") return objdb::runStreamCommand(argc - 1, argv + 1);
   if (command == "remote") return objdb::runRemoteCommand(argc - 1, argv + 1);
   if (command == "report") return objdb::runReportCommand(argc - 1, argv + 1);
+  if (command == "eval") return objdb::runEvalCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);
   return 2;
 }

@@ -105,8 +105,8 @@ int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
   request.set_include_merged(o.merged);
   request.set_page_size(1000);
   size_t count = 0;
-  std::printf("%8s %-7s %6s %-22s %-9s  %s\n", "id", "state", "poses", "extent (m)", "surface",
-              "sessions");
+  std::printf("%8s %-7s %6s %6s %-22s %-9s  %s\n", "id", "state", "poses", "places",
+              "extent (m)", "surface", "sessions");
   while (true) {
     grpc::ClientContext context;
     cli::setDeadline(&context, o.timeout_s);
@@ -114,9 +114,9 @@ int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
     const grpc::Status status = stub.ListObjects(&context, request, &page);
     if (!status.ok()) return cli::reportRpcError(kCommand, "ListObjects", o.connection.server, status);
     for (const auto& m : page.objects()) {
-      std::printf("%8llu %-7s %6u %-22s %-9s  %s\n", (unsigned long long)m.id(),
+      std::printf("%8llu %-7s %6u %6u %-22s %-9s  %s\n", (unsigned long long)m.id(),
                   m.state() == v1::OBJECT_STATE_MERGED ? "merged" : "active", m.num_poses(),
-                  extent(m.bounds_object()).c_str(),
+                  m.num_places(), extent(m.bounds_object()).c_str(),
                   m.structure() ? "structure" : m.planar() ? "planar" : "object",
                   absl::StrJoin(m.session_names(), ", ").c_str());
       ++count;

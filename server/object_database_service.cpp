@@ -411,9 +411,24 @@ void ObjectDatabaseService::queueInserts(const std::shared_ptr<LiveSession>& ses
   }
 }
 
+namespace {
+// A database write of a session failed: logged, and its stream (if open) ends with the error.
+Status failInsert(IngestStream* stream, const Status& failed) {
+  logger("server")->error("{}", std::string(failed.message()));
+  if (stream != nullptr) {
+    std::lock_guard lock(stream->mutex);
+    stream->cancelled = true;
+    stream->changed.notify_all();
+    stream->finish(toGrpcStatus(failed));
+  }
+  return failed;
+}
+}  // namespace
+
 Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
                                      RawSegmentJob& job) {
   const gsm::RawSegment& segment = job.segment;
+  if (job.withdraw) return withdraw(session, stream, segment.label);
   // Model-to-scene verification on the live path: this session's poses against the map as it
   // was when the segment was extracted, another live session's against its newest snapshot,
   // ended sessions' against their stored scenes (the database asks the store for those).
@@ -435,20 +450,21 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     const Status failed = annotate(
         report.status(), absl::StrFormat("inserting segment %d of session %s into the database",
                                          segment.label, session.name));
-    logger("server")->error("{}", std::string(failed.message()));
-    if (stream != nullptr) {
-      std::lock_guard lock(stream->mutex);
-      stream->cancelled = true;
-      stream->changed.notify_all();
-      stream->finish(toGrpcStatus(failed));
-    }
-    return failed;
+    return failInsert(stream, failed);
   }
   candidates_skipped_.fetch_add(report->unreadable_candidates);
   for (const auto& r : report->results) {
     scene_checks_.fetch_add(r.scene_checks);
     poses_without_scene_.fetch_add(r.scenes_missing);
     if (r.stage == "scene") candidates_rejected_by_scene_.fetch_add(1);
+    if (r.accepted && r.same_place && report->merged && r.model_id == report->model_id) {
+      merges_same_place_.fetch_add(1);
+    }
+  }
+  {
+    std::lock_guard lock(timings_mutex_);
+    insert_timings_ += report->timings;
+    ++inserts_;
   }
   const auto segment_id = store_->rawSegmentId({session.name, segment.label});
   {
@@ -503,6 +519,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
       ev.set_scene_checks(uint32_t(r.scene_checks));
       ev.set_scene_rmse_max_m(r.scene_rmse_max);
       ev.set_scene_overlap_min_voxels(r.scene_overlap_min);
+      ev.set_same_place(r.same_place);
       break;
     }
   } else {
@@ -510,6 +527,24 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     o.set_object_id(uint64_t(report->model_id));
   }
   stream->send(std::move(event));
+  return absl::OkStatus();
+}
+
+Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* stream,
+                                       gsm::Label label) {
+  const StatusOr<int64_t> model = db_->withdrawSegment(session.name, label);
+  if (!model.ok()) {
+    const Status failed = annotate(
+        model.status(), absl::StrFormat("withdrawing segment %d of session %s from the database",
+                                        label, session.name));
+    return failInsert(stream, failed);
+  }
+  if (*model == 0) return absl::OkStatus();  // never inserted
+  logger("server")->debug("session {}: segment {} withdrawn from object {} (its label merged "
+                          "into another or its voxels taken)",
+                          session.name, label, *model);
+  std::lock_guard lock(session.mutex);
+  session.counters.set_segments_withdrawn(session.counters.segments_withdrawn() + 1);
   return absl::OkStatus();
 }
 

@@ -32,6 +32,7 @@
 
 #include "core/common/params.h"
 #include "core/common/status.h"
+#include "core/database/object_database.h"
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "storage/sqlite_store.h"
 
@@ -156,6 +157,8 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // Algorithm 1 for one segment (database thread); events go to `stream` when given. Errors:
   // storage failures (a segment the database cannot take is skipped, OK).
   Status insert(LiveSession& session, IngestStream* stream, RawSegmentJob& job);
+  // A segment the GSM withdrew, given back by the database (counted in segments_withdrawn).
+  Status withdraw(LiveSession& session, IngestStream* stream, gsm::Label label);
   // Runs on the database thread: extract everything, insert, store the scene, end the session.
   Status flush(LiveSession& session);
   // flush() unless the session ended already; failures are logged (database thread).
@@ -190,6 +193,11 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::atomic<uint64_t> scene_checks_{0};
   std::atomic<uint64_t> candidates_rejected_by_scene_{0};
   std::atomic<uint64_t> poses_without_scene_{0};
+  std::atomic<uint64_t> merges_same_place_{0};
+  // Insert time by stage since start (GetStats insert_timings).
+  std::mutex timings_mutex_;
+  database::InsertTimings insert_timings_;
+  uint64_t inserts_ = 0;
   std::condition_variable janitor_wake_;  // with mutex_: stop() wakes the janitor
   std::thread janitor_;
   std::unique_ptr<JobQueue> database_queue_;  // last: its thread stops first

@@ -10,6 +10,7 @@
 
 #include "absl/strings/str_format.h"
 #include "core/io/image_io.h"
+#include "core/model/object_model.h"
 
 namespace objdb::server {
 namespace {
@@ -387,6 +388,10 @@ void toProto(const storage::ModelSummary& model, v1::ObjectSummary* out) {
     if (!seen) out->add_session_names(o.session);
   }
   out->set_num_poses(uint32_t(model.observations.size()));
+  std::vector<std::pair<std::string, Transform>> poses;
+  for (const auto& o : model.observations) poses.emplace_back(o.session, o.T_world_object);
+  out->set_num_places(
+      uint32_t(model::countPlaces(poses, 0.5 * (model.bbox_min + model.bbox_max))));
   setVector(model.bbox_min, out->mutable_bounds_object()->mutable_min());
   setVector(model.bbox_max, out->mutable_bounds_object()->mutable_max());
   out->set_planar(model.planar);

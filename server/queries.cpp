@@ -339,6 +339,24 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
     response->set_scene_checks(scene_checks_.load());
     response->set_candidates_rejected_by_scene(candidates_rejected_by_scene_.load());
     response->set_poses_without_scene(poses_without_scene_.load());
+    response->set_merges_same_place(merges_same_place_.load());
+    {
+      std::lock_guard lock(timings_mutex_);
+      const database::InsertTimings& t = insert_timings_;
+      v1::InsertTimingTotals& out = *response->mutable_insert_timings();
+      out.set_inserts(inserts_);
+      out.set_cloud_s(t.cloud_ms / 1000);
+      out.set_keypoints_s(t.keypoints_ms / 1000);
+      out.set_descriptors_s(t.descriptors_ms / 1000);
+      out.set_match_register_s(t.match_register_ms / 1000);
+      out.set_model_verify_s(t.model_verify_ms / 1000);
+      out.set_scene_verify_s(t.scene_verify_ms / 1000);
+      out.set_replace_s(t.replace_ms / 1000);
+      out.set_prefilter_s(t.prefilter_ms / 1000);
+      out.set_load_s(t.load_ms / 1000);
+      out.set_store_s(t.store_ms / 1000);
+      out.set_total_s(t.total_ms / 1000);
+    }
     return absl::OkStatus();
   };
   return finishUnary(context, run());

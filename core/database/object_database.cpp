@@ -151,6 +151,15 @@ Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_i
   return absl::OkStatus();
 }
 
+StatusOr<int64_t> ObjectDatabase::withdrawSegment(const std::string& session, gsm::Label label) {
+  const SegmentKey key{session, label};
+  const auto it = segment_model_.find(key);
+  if (it == segment_model_.end()) return int64_t{0};
+  const int64_t model_id = it->second;
+  OBJDB_RETURN_IF_ERROR(removeContribution(key, model_id));
+  return model_id;
+}
+
 void ObjectDatabase::changed(int64_t model_id, std::optional<MatchEntry> entry) {
   std::lock_guard lock(mutex_);
   indices_.erase(model_id);
@@ -230,6 +239,22 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
     return result;
   }
   const Transform& T_j_i = result.registration.T_target_source;
+  const Transform T_i_j = T_j_i.inverse();
+
+  // One surface under two GSM labels of one session: the registration puts the candidate's
+  // centre where one of its placements of this session already has it.
+  if (!candidate.cloud.points.empty()) {
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (const auto& p : candidate.cloud.points) centre += p.cast<double>();
+    centre /= double(candidate.cloud.points.size());
+    for (const auto& in : incoming.observations) {
+      for (const auto& o : candidate.observations) {
+        result.same_place = result.same_place ||
+                            model::samePlace(in.session, in.T_world_object * T_i_j, o.session,
+                                             o.T_world_object, centre);
+      }
+    }
+  }
 
   // Model to model: t_i resampled into t_j's lattice.
   t = Clock::now();
@@ -249,7 +274,6 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
   matching::mergeGrids(&merged, incoming.grid, T_j_i, params_.tsdf.max_weight);
   std::vector<std::pair<std::string, Transform>> poses;
   for (const auto& o : candidate.observations) poses.emplace_back(o.session, o.T_world_object);
-  const Transform T_i_j = T_j_i.inverse();
   for (const auto& o : incoming.observations) {
     poses.emplace_back(o.session, o.T_world_object * T_i_j);
   }

@@ -34,6 +34,10 @@ struct CandidateResult {
   std::string reason;
   matching::Registration registration;
   matching::Verdict model_verdict;
+  // The registration puts the segment onto a placement of its own session (model::samePlace):
+  // one surface under two GSM labels. Merged like any match (the model gains its geometry), it
+  // adds an observation but no placement.
+  bool same_place = false;
   size_t scene_checks = 0;     // poses verified against their scene
   // Poses whose session had no scene map, neither live nor stored: the candidate is rejected at
   // the first (a merge is never accepted on the model-to-model check alone).
@@ -55,6 +59,21 @@ struct InsertTimings {
   // upkeep and votes), loading the candidates, storing the result (a merged model's rebuild
   // included).
   double replace_ms = 0, prefilter_ms = 0, load_ms = 0, store_ms = 0;
+
+  InsertTimings& operator+=(const InsertTimings& o) {
+    cloud_ms += o.cloud_ms;
+    keypoints_ms += o.keypoints_ms;
+    descriptors_ms += o.descriptors_ms;
+    match_register_ms += o.match_register_ms;
+    model_verify_ms += o.model_verify_ms;
+    scene_verify_ms += o.scene_verify_ms;
+    total_ms += o.total_ms;
+    replace_ms += o.replace_ms;
+    prefilter_ms += o.prefilter_ms;
+    load_ms += o.load_ms;
+    store_ms += o.store_ms;
+    return *this;
+  }
 };
 
 struct InsertReport {
@@ -85,6 +104,13 @@ class ObjectDatabase {
   // the store; a pose with neither rejects the candidate (counted in scenes_missing).
   StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment,
                                        const LiveScenes& live = {});
+
+  // Takes back segment (session, label), which the GSM withdrew (merged into another label, or
+  // lost its voxels to others: gsm::Gsm::takeWithdrawn): the model that holds it is rebuilt
+  // without it, or removed when it was its only segment. Returns that model's id, 0 when the
+  // database does not hold the segment (never inserted: too small, or failed to build). The raw
+  // segment stays stored, as a record of what was extracted.
+  StatusOr<int64_t> withdrawSegment(const std::string& session, gsm::Label label);
 
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
   StatusOr<std::vector<int64_t>> candidatesFor(const model::ObjectModel& model);

@@ -160,6 +160,7 @@ void Gsm::merge(Label keep, Label gone) {
   k.voxels += g.voxels;
   k.last_update_frame = std::max(k.last_update_frame, g.last_update_frame);
   k.extracted_frame = -1;
+  if (g.extracted_voxels > 0) withdrawn_.push_back(gone);  // its voxels now come with `keep`
   k.blocks.insert(g.blocks.begin(), g.blocks.end());
   k.bounds.extend(g.bounds);
   info_.erase(gone);
@@ -433,10 +434,17 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
 
 std::vector<RawSegment> Gsm::extractIdle(bool flush) {
   std::vector<Label> ready;
-  for (const auto& [label, info] : info_) {
+  for (auto& [label, info] : info_) {
     if (info.extracted_frame >= 0 || info.last_update_frame < 0) continue;
     const bool idle = frame_ - 1 - info.last_update_frame >= params_.extraction_age_frames;
-    if ((flush || idle) && info.voxels >= params_.min_label_voxels) ready.push_back(label);
+    if (!flush && !idle) continue;
+    if (info.voxels >= params_.min_label_voxels) {
+      ready.push_back(label);
+    } else if (info.extracted_voxels > 0) {  // too small now: its earlier segment is withdrawn
+      withdrawn_.push_back(label);
+      info.extracted_voxels = 0;
+      info.extracted_frame = frame_;
+    }
   }
   std::sort(ready.begin(), ready.end());
   std::vector<RawSegment> segments;
@@ -455,7 +463,12 @@ std::vector<RawSegment> Gsm::extractIdle(bool flush) {
                         [&](size_t i) { return block[i].empty() ? Label{0} : mainOf(block[i]); },
                         &voxels);
     }
-    if (voxels.size() < size_t(params_.min_label_voxels)) continue;
+    if (voxels.size() < size_t(params_.min_label_voxels)) {
+      if (info.extracted_voxels > 0) withdrawn_.push_back(label);
+      info.extracted_voxels = 0;
+      continue;
+    }
+    info.extracted_voxels = int64_t(voxels.size());
     const size_t last = size_t(std::max<int64_t>(info.last_update_frame, 0));
     const Eigen::Vector3f camera =
         last < camera_positions_.size() ? camera_positions_[last] : Eigen::Vector3f::Zero();
@@ -469,6 +482,14 @@ std::vector<RawSegment> Gsm::extractIdle(bool flush) {
     segments.back().observation_depth_m = last < camera_positions_.size() ? depth : 0.0f;
   }
   return segments;
+}
+
+std::vector<Label> Gsm::takeWithdrawn() {
+  std::vector<Label> out;
+  out.swap(withdrawn_);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
 }
 
 size_t Gsm::labelBytes() const {

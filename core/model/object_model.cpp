@@ -11,6 +11,25 @@
 #include "core/tsdf/mesh_extraction.h"
 
 namespace objdb::model {
+
+bool samePlace(const std::string& session_a, const Transform& T_world_a,
+               const std::string& session_b, const Transform& T_world_b,
+               const Eigen::Vector3d& centre) {
+  return session_a == session_b && (T_world_a * centre - T_world_b * centre).norm() < kSamePlaceM;
+}
+
+size_t countPlaces(const std::vector<std::pair<std::string, Transform>>& poses,
+                   const Eigen::Vector3d& centre) {
+  size_t places = 0;
+  for (size_t i = 0; i < poses.size(); ++i) {
+    bool joined = false;
+    for (size_t j = 0; j < i && !joined; ++j) {
+      joined = samePlace(poses[i].first, poses[i].second, poses[j].first, poses[j].second, centre);
+    }
+    places += joined ? 0 : 1;
+  }
+  return places;
+}
 namespace {
 
 using Clock = std::chrono::steady_clock;

@@ -10,6 +10,7 @@
 #include <array>
 #include <cstdint>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -33,6 +34,19 @@ struct Observation {
   Transform T_world_object = Transform::Identity();
   Transform T_object_segment = Transform::Identity();
 };
+
+// Two observations of one model are one placement when they are of one session and put the
+// model's centre (model frame) within this of each other in the world: one surface under two GSM
+// labels (the GSM split it, or kept a stale label), not a repeated object. Two objects cannot
+// share a place.
+inline constexpr double kSamePlaceM = 0.05;
+bool samePlace(const std::string& session_a, const Transform& T_world_a,
+               const std::string& session_b, const Transform& T_world_b,
+               const Eigen::Vector3d& centre);
+// Distinct placements among `poses` (session, T_world_object): each pose joins the first earlier
+// one at its place.
+size_t countPlaces(const std::vector<std::pair<std::string, Transform>>& poses,
+                   const Eigen::Vector3d& centre);
 
 // Time spent building a model, ms (paper table II: P, K, D).
 struct BuildTimings {

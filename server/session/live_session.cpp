@@ -142,6 +142,17 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
                                            v1::SegmentExtracted::Reason reason) {
   std::vector<gsm::RawSegment> segments = session.map->extractIdle(everything);
   std::vector<RawSegmentJob> jobs;
+  // Withdrawals first: a merged label's survivor, extracted below, must not match the segment
+  // it replaces.
+  for (const gsm::Label label : session.map->takeWithdrawn()) {
+    const tsdf::TsdfLayer& map = session.map->tsdf();
+    RawSegmentJob job{gsm::RawSegment{label, Transform::Identity(),
+                                      tsdf::TsdfLayer::create(map.voxelSize(), map.voxelsPerSide())
+                                          .value()},
+                      reason, session.last_index, nullptr};
+    job.withdraw = true;  // the segment carries only its label
+    jobs.push_back(std::move(job));
+  }
   if (segments.empty()) return jobs;
   auto scene = std::make_shared<const tsdf::TsdfLayer>(session.map->tsdf().snapshot());
   {

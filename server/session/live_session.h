@@ -37,6 +37,9 @@ struct RawSegmentJob {
   // The session's map (TSDF) when the segment was extracted, blocks shared copy-on-write with
   // the live map: the scene this session's poses are verified against.
   std::shared_ptr<const tsdf::TsdfLayer> scene;
+  // Not a segment to insert: the GSM withdrew segment.label (gsm::Gsm::takeWithdrawn), whose
+  // earlier segment the database gives back.
+  bool withdraw = false;
 };
 
 // One session with a map in memory: from its header until EndSession.

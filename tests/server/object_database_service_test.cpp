@@ -98,6 +98,7 @@ gsm::Gsm runPipeline(const std::string& name, size_t frames, database::ModelStor
   EXPECT_TRUE(segmenter.ok() && map.ok() && db.ok());
   // As the server does: the session's poses are verified against its map as it is now.
   auto insert = [&](std::vector<gsm::RawSegment> segments) {
+    for (const gsm::Label gone : map->takeWithdrawn()) (void)(*db)->withdrawSegment(name, gone);
     const auto scene = std::make_shared<const tsdf::TsdfLayer>(map->tsdf().snapshot());
     const database::LiveScenes live = [&](const std::string& session) {
       return session == name ? scene : nullptr;

@@ -195,6 +195,66 @@ TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
   EXPECT_EQ(f.store.modelIds().value().size(), 2u);
 }
 
+TEST(ObjectDatabase, OneSurfaceUnderTwoLabelsOfOneSessionIsOnePlacement) {
+  Fixture f;
+  const World& a = kMonday;
+  addScenes(&f.store);
+  // Two labels of monday hold overlapping parts of the one box (the GSM split it): the
+  // registration puts the second onto the first's placement. It merges (more of the same
+  // object), flagged same_place, and the model still has one place.
+  auto first = f.db->insertSegment("monday", segment(7, a, -0.3f, 0.1f));
+  ASSERT_TRUE(first.ok()) << first.status();
+  auto second = f.db->insertSegment("monday", segment(8, a, -0.1f, 0.3f));
+  ASSERT_TRUE(second.ok()) << second.status();
+  ASSERT_EQ(second->results.size(), 1u);
+  ASSERT_TRUE(second->merged) << second->results[0].stage << ": " << second->results[0].reason;
+  EXPECT_TRUE(second->results[0].same_place);
+  auto model = f.store.model(first->model_id).value();
+  ASSERT_EQ(model->observations.size(), 2u);
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& p : model->cloud.points) centre += p.cast<double>();
+  centre /= double(model->cloud.points.size());
+  auto poses = [&] {
+    std::vector<std::pair<std::string, Transform>> out;
+    for (const auto& o : f.store.model(first->model_id).value()->observations) {
+      out.emplace_back(o.session, o.T_world_object);
+    }
+    return out;
+  };
+  EXPECT_EQ(model::countPlaces(poses(), centre), 1u);
+  // The same box elsewhere on tuesday is a repeated object: a second place, not same_place.
+  auto tuesday = f.db->insertSegment("tuesday", segment(3, kTuesday, -0.1f, 0.3f));
+  ASSERT_TRUE(tuesday.ok()) << tuesday.status();
+  ASSERT_TRUE(tuesday->merged);
+  for (const auto& r : tuesday->results) EXPECT_FALSE(r.same_place);
+  EXPECT_EQ(model::countPlaces(poses(), centre), 2u);
+}
+
+TEST(ObjectDatabase, AWithdrawnSegmentLeavesItsModel) {
+  Fixture f;
+  addScenes(&f.store);
+  auto first = f.db->insertSegment("monday", segment(7, kMonday, -0.3f, 0.1f));
+  ASSERT_TRUE(first.ok()) << first.status();
+  auto second = f.db->insertSegment("tuesday", segment(3, kTuesday, -0.1f, 0.3f));
+  ASSERT_TRUE(second.ok() && second->merged);
+  // Tuesday's label 3 was merged into another label by the GSM: its segment goes.
+  auto withdrawn = f.db->withdrawSegment("tuesday", 3);
+  ASSERT_TRUE(withdrawn.ok()) << withdrawn.status();
+  EXPECT_EQ(*withdrawn, first->model_id);
+  auto model = f.store.model(first->model_id).value();
+  ASSERT_EQ(model->observations.size(), 1u);
+  EXPECT_EQ(model->observations[0].session, "monday");
+  // A segment the database never took: nothing to do. The last segment of a model: it goes.
+  EXPECT_EQ(f.db->withdrawSegment("tuesday", 99).value(), 0);
+  EXPECT_EQ(f.db->withdrawSegment("monday", 7).value(), first->model_id);
+  EXPECT_TRUE(f.store.modelIds().value().empty());
+  // Inserted again afterwards, it is a new model like any other.
+  auto again = f.db->insertSegment("monday", segment(7, kMonday, -0.3f, 0.1f));
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_FALSE(again->replaced_earlier);
+  EXPECT_EQ(f.store.modelIds().value().size(), 1u);
+}
+
 TEST(ObjectDatabase, TheSceneVetoesAMergeItContradicts) {
   Fixture f;
   const World& a = kMonday;

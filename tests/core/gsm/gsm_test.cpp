@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <set>
 #include <utility>
 #include <vector>
 
@@ -156,6 +157,37 @@ TEST(Gsm, TwoSegmentsOfOneObjectGetMergedAfterAFewFrames) {
     }
   }
   EXPECT_GT(labelled, box_voxels);  // box and floor
+}
+
+// A label extracted before its GSM merge is withdrawn: the survivor's next segment holds its
+// voxels, so whoever kept its segment must drop it (else one surface is kept twice).
+TEST(Gsm, ALabelExtractedBeforeItMergedIsWithdrawnOnce) {
+  const Intrinsics k = Intrinsics::tango();
+  const World world;
+  Gsm gsm = makeGsm(k, GsmParams{});
+  const sim::Renderer renderer(k);
+  sim::RenderOutput out;
+  renderer.render(world.instances(), world.camera(0.0), &out);
+  auto r = gsm.integrate(out.depth, labelsFrom(out.instances, true), world.camera(0.0));
+  ASSERT_TRUE(r.ok());
+  const Label left = r->segment_labels[1], right = r->segment_labels[2];
+  // Both halves extracted (a flush), nothing withdrawn yet.
+  std::set<Label> extracted;
+  for (const auto& s : gsm.extractIdle(true)) extracted.insert(s.label);
+  ASSERT_TRUE(extracted.count(left) && extracted.count(right));
+  EXPECT_TRUE(gsm.takeWithdrawn().empty());
+  // The whole box as one segment until the halves merge; the newer label goes.
+  for (int f = 1; f <= 3; ++f) {
+    renderer.render(world.instances(), world.camera(0.05 * f), &out);
+    ASSERT_TRUE(gsm.integrate(out.depth, labelsFrom(out.instances, false), world.camera(0.05 * f)).ok());
+  }
+  ASSERT_EQ(gsm.resolve(right), left);
+  EXPECT_EQ(gsm.takeWithdrawn(), std::vector<Label>{right});
+  EXPECT_TRUE(gsm.takeWithdrawn().empty()) << "returned once";
+  // The survivor comes out again with both halves' voxels.
+  bool survivor = false;
+  for (const auto& s : gsm.extractIdle(true)) survivor = survivor || s.label == left;
+  EXPECT_TRUE(survivor);
 }
 
 // Two labels seen apart in most frames (each claimed by its own segment) are not merged by a

@@ -1,0 +1,331 @@
+#include "client/db_score.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <set>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/container/flat_hash_set.h"
+#include "absl/strings/str_format.h"
+#include "core/common/grid_key.h"
+#include "core/model/features.h"
+
+namespace objdb::cli {
+
+StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets) {
+  GroundTruth objects;
+  for (const auto& [session, folder] : datasets) {
+    OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<io::Dataset> ds, io::openDataset(folder));
+    if (!ds->hasInstances()) {
+      return absl::FailedPreconditionError(absl::StrFormat(
+          "dataset %s has no ground truth (no instances/ folder); `objdb report merges` draws "
+          "its merges",
+          folder));
+    }
+    OBJDB_ASSIGN_OR_RETURN(std::vector<io::GroundTruthObject> read,
+                           io::readObjectsJson(std::filesystem::path(folder) / "objects.json"));
+    for (auto& g : read) objects[session][g.id] = g;
+  }
+  return objects;
+}
+
+TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
+  TruthScore s;
+  // Kind of every placement ("" unknown) and whether it is true structure.
+  struct Truth {
+    std::string kind;
+    std::string object;  // session/id
+    bool structure = false;
+  };
+  std::vector<std::vector<Truth>> truths(rows.size());
+  std::map<std::string, size_t> mergeable_per_kind;
+  s.models = rows.size();
+  for (size_t r = 0; r < rows.size(); ++r) {
+    const Row& row = rows[r];
+    const bool unmatched = row.summary.planar || row.summary.structure;
+    for (const Placement& p : row.placements) {
+      ++s.placements;
+      double purity = 0.0;
+      const int id = truthOf(p, &purity);
+      Truth t;
+      const auto session = truth.find(p.session);
+      if (id != 0 && session != truth.end() && session->second.count(id) != 0) {
+        const io::GroundTruthObject& g = session->second.at(id);
+        t.kind = g.category;
+        t.structure = g.is_structure;
+        t.object = absl::StrFormat("%s/%d", p.session, id);
+        ++s.known;
+      }
+      s.planar += row.summary.planar ? 1 : 0;
+      s.structure += row.summary.structure ? 1 : 0;
+      if (t.structure) {
+        ++s.on_structure;
+        s.on_structure_flagged += row.summary.structure ? 1 : 0;
+      }
+      if (!unmatched) {
+        ++s.mergeable;
+        if (!t.kind.empty() && !t.structure) ++mergeable_per_kind[t.kind];
+      }
+      truths[r].push_back(t);
+    }
+    if (row.placements.size() < 2) continue;
+    ++s.multi;
+    s.multi_place += places(row) >= 2 ? 1 : 0;
+    std::set<std::string> kinds;
+    bool has_structure = false;
+    for (const Truth& t : truths[r]) {
+      if (!t.kind.empty()) kinds.insert(t.kind);
+      has_structure = has_structure || t.structure;
+    }
+    if (kinds.size() > 1) {
+      ++s.erroneous;
+      std::string list;
+      for (const auto& k : kinds) list += (list.empty() ? "" : " + ") + k;
+      s.findings.push_back(
+          absl::StrFormat("erroneous merge: object %d holds %s", row.summary.id, list));
+    }
+    if (has_structure) {
+      ++s.structure_merges;
+      s.findings.push_back(absl::StrFormat(
+          "structure merge: object %d holds a floor or wall placement", row.summary.id));
+    }
+  }
+  // Recall: mergeable placements of kinds with two or more of them that share their model with
+  // another placement of their kind at another place.
+  std::map<std::string, std::set<int64_t>> models_of_object;
+  std::map<std::string, std::set<std::string>> objects_of_kind;
+  for (size_t r = 0; r < rows.size(); ++r) {
+    const Row& row = rows[r];
+    if (row.summary.planar || row.summary.structure) continue;
+    for (size_t a = 0; a < truths[r].size(); ++a) {
+      const Truth& t = truths[r][a];
+      if (t.kind.empty() || t.structure) continue;
+      models_of_object[t.object].insert(row.summary.id);
+      objects_of_kind[t.kind].insert(t.object);
+      if (mergeable_per_kind[t.kind] < 2) continue;
+      ++s.repeated;
+      // Another placement of its kind elsewhere: one surface under two GSM labels at one place
+      // (the same object re-segmented) is not a repeated object found.
+      for (size_t b = 0; b < truths[r].size(); ++b) {
+        if (b == a || truths[r][b].kind != t.kind) continue;
+        if (samePlace(row, row.placements[a], row.placements[b])) continue;
+        ++s.with_kind;
+        break;
+      }
+    }
+  }
+  // Ids are per session: an object seen in three sessions counts three times.
+  for (const auto& [kind, ids] : objects_of_kind) {
+    size_t models = 0;
+    for (const auto& id : ids) models += models_of_object[id].size();
+    s.kinds.push_back({kind, ids.size(), mergeable_per_kind[kind],
+                       double(models) / double(ids.size())});
+  }
+  return s;
+}
+
+namespace {
+void line(const char* what, const std::string& value) {
+  std::printf("%-58s %s\n", what, value.c_str());
+}
+}  // namespace
+
+void printTruthScore(const TruthScore& s) {
+  for (const auto& f : s.findings) std::printf("%s\n", f.c_str());
+  line("placements (raw segments in the database)", std::to_string(s.placements));
+  line("  with ground truth (>= 50 % of their points on one instance)", std::to_string(s.known));
+  line("  planar / structure (the database's flags)",
+       absl::StrFormat("%d / %d", s.planar, s.structure));
+  line("  on true structure (floor, walls) / of them flagged structure",
+       absl::StrFormat("%d / %d", s.on_structure, s.on_structure_flagged));
+  line("mergeable (neither planar nor structure)", std::to_string(s.mergeable));
+  line("object models", std::to_string(s.models));
+  line("models from >= 2 segments", std::to_string(s.multi));
+  line("  of them at >= 2 places (not one surface under two labels)", std::to_string(s.multi_place));
+  line("erroneous merges (kinds differ)", std::to_string(s.erroneous));
+  line("structure merges (true structure in a model of >= 2)", std::to_string(s.structure_merges));
+  line("repeated kinds' mergeable segments with their kind elsewhere",
+       s.repeated == 0 ? std::string("- (no repeated kind)")
+                       : absl::StrFormat("%.0f %% (%d of %d)",
+                                         100.0 * double(s.with_kind) / double(s.repeated),
+                                         s.with_kind, s.repeated));
+  std::printf("\n%-22s %8s %10s %14s\n", "kind", "objects", "segments", "models/object");
+  for (const auto& k : s.kinds) {
+    std::printf("%-22s %8zu %10zu %14.2f\n", k.kind.c_str(), k.objects, k.segments,
+                k.models_per_object);
+  }
+}
+
+namespace {
+
+constexpr int kMaxDominantPlanes = 8;
+constexpr float kMinDominantShare = 0.02f;
+constexpr float kMinDominantArea = 1.0f;  // m²
+constexpr size_t kMaxPlanePoints = 150000;  // surface voxels the plane fit looks at
+
+// The voxels (keys) of a scene's dominant planes.
+absl::flat_hash_set<uint64_t> dominantPlaneVoxels(const tsdf::TsdfLayer& scene, size_t* planes) {
+  const float voxel = scene.voxelSize();
+  const int vps = scene.voxelsPerSide();
+  std::vector<tsdf::VoxelIndex> surface;
+  for (const auto& [b, block] : scene.blocks()) {
+    const auto& voxels = block->voxels();
+    for (size_t i = 0; i < voxels.size(); ++i) {
+      if (!(voxels[i].weight > 0.0f) || !(std::abs(voxels[i].distance) <= 0.5f * voxel)) continue;
+      const int x = int(i % size_t(vps)), y = int((i / size_t(vps)) % size_t(vps)),
+                z = int(i / (size_t(vps) * size_t(vps)));
+      surface.push_back(b * vps + Eigen::Vector3i(x, y, z));
+    }
+  }
+  absl::flat_hash_set<uint64_t> keys;
+  *planes = 0;
+  if (surface.size() < 100) return keys;
+  const size_t step = std::max<size_t>(1, surface.size() / kMaxPlanePoints);
+  PointCloud cloud;
+  std::vector<tsdf::VoxelIndex> sampled;
+  for (size_t i = 0; i < surface.size(); i += step) {
+    cloud.points.push_back(scene.voxelCenter(surface[i]));
+    sampled.push_back(surface[i]);
+  }
+  const auto fitted = model::fitPlanes(
+      cloud, 2.0f * voxel, 500, kMaxDominantPlanes,
+      size_t(std::ceil(kMinDominantShare * float(cloud.points.size()))));
+  // Every surface voxel within the fit distance of a plane, in a 4-voxel cell holding one of its
+  // sampled inliers, belongs to it (the fit saw a sample; the cells keep a plane to its faces).
+  auto cellOf = [](const tsdf::VoxelIndex& v) {
+    return packGridKey(tsdf::VoxelIndex(v.x() >> 2, v.y() >> 2, v.z() >> 2));
+  };
+  for (const auto& plane : fitted) {
+    absl::flat_hash_set<uint64_t> cells;
+    for (uint32_t i : plane.inliers) cells.insert(cellOf(sampled[i]));
+    const Eigen::Vector3f n = plane.coefficients.head<3>();
+    std::vector<uint64_t> on;
+    for (const auto& v : surface) {
+      if (std::abs(n.dot(scene.voxelCenter(v)) + plane.coefficients.w()) > 2.0f * voxel) continue;
+      if (cells.count(cellOf(v)) != 0) on.push_back(packGridKey(v));
+    }
+    // Its faces bigger than an object's can be (a floor, a wall, a partition): connected pieces
+    // of the voxel-sized cells its voxels cover, projected onto the plane, of at least
+    // kMinDominantArea each. (Table tops at one height are one plane but separate faces.)
+    const Eigen::Vector3f a = (std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX()
+                                                        : Eigen::Vector3f::UnitY())
+                                  .cross(n)
+                                  .normalized();
+    const Eigen::Vector3f b = n.cross(a);
+    auto cell2 = [&](uint64_t key) {
+      const Eigen::Vector3f c = scene.voxelCenter(unpackGridKey(key));
+      return packGridKey(Eigen::Vector3i(int(std::floor(c.dot(a) / voxel)),
+                                         int(std::floor(c.dot(b) / voxel)), 0));
+    };
+    absl::flat_hash_map<uint64_t, int> component;  // cell → piece (−1: not visited yet)
+    for (uint64_t key : on) component[cell2(key)] = -1;
+    std::vector<size_t> piece_cells;
+    for (auto& [start, id] : component) {
+      if (id >= 0) continue;
+      const int piece = int(piece_cells.size());
+      piece_cells.push_back(0);
+      std::vector<uint64_t> stack = {start};
+      id = piece;
+      while (!stack.empty()) {
+        const Eigen::Vector3i c = unpackGridKey(stack.back());
+        stack.pop_back();
+        ++piece_cells.back();
+        for (int dy = -2; dy <= 2; ++dy) {  // across one-cell holes (sensor dropouts)
+          for (int dx = -2; dx <= 2; ++dx) {
+            const auto it = component.find(packGridKey(c + Eigen::Vector3i(dx, dy, 0)));
+            if (it == component.end() || it->second >= 0) continue;
+            it->second = piece;
+            stack.push_back(it->first);
+          }
+        }
+      }
+    }
+    const size_t before = keys.size();
+    for (uint64_t key : on) {
+      const size_t cells_of_piece = piece_cells[size_t(component.at(cell2(key)))];
+      if (float(cells_of_piece) * voxel * voxel >= kMinDominantArea) {
+        keys.insert(key);
+      }
+    }
+    if (keys.size() > before) ++*planes;
+  }
+  return keys;
+}
+
+}  // namespace
+
+StatusOr<StructureScore> scoreStructure(const storage::SqliteStore& store,
+                                        const std::vector<Row>& rows) {
+  StructureScore s;
+  std::set<std::string> sessions;
+  for (const Row& row : rows) {
+    for (const Placement& p : row.placements) sessions.insert(p.session);
+  }
+  std::map<std::string, absl::flat_hash_set<uint64_t>> planes;  // session → plane voxels
+  float voxel = 0.0f;
+  for (const std::string& session : sessions) {
+    auto scene = store.scene(session);
+    if (absl::IsNotFound(scene.status())) continue;
+    if (!scene.ok()) return scene.status();
+    size_t n = 0;
+    planes[session] = dominantPlaneVoxels(**scene, &n);
+    voxel = (*scene)->voxelSize();
+    s.planes += n;
+    ++s.sessions_with_scene;
+  }
+  for (const Row& row : rows) {
+    bool on_any = false;
+    for (const Placement& p : row.placements) {
+      ++s.placements;
+      const auto it = planes.find(p.session);
+      if (it == planes.end() || row.points.empty()) continue;
+      size_t on = 0;
+      for (const auto& q : row.points) {
+        const Eigen::Vector3f w = (p.T_world_object.cast<float>() * q);
+        const Eigen::Vector3i v = (w / voxel).array().floor().cast<int>();
+        bool near = false;
+        for (int dz = -1; dz <= 1 && !near; ++dz) {
+          for (int dy = -1; dy <= 1 && !near; ++dy) {
+            for (int dx = -1; dx <= 1 && !near; ++dx) {
+              near = it->second.count(packGridKey(v + Eigen::Vector3i(dx, dy, dz))) != 0;
+            }
+          }
+        }
+        on += near ? 1 : 0;
+      }
+      if (2 * on < row.points.size()) continue;
+      ++s.on_planes;
+      s.on_planes_flagged += row.summary.structure ? 1 : 0;
+      on_any = true;
+    }
+    if (row.placements.size() < 2) continue;
+    ++s.multi;
+    if (places(row) < 2) continue;
+    ++s.multi_place;
+    if (on_any) {
+      ++s.structure_merges;
+      s.findings.push_back(absl::StrFormat(
+          "structure merge: object %d (%d places, %s) lies on a dominant plane",
+          row.summary.id, places(row),
+          row.summary.structure ? "structure" : row.summary.planar ? "planar" : "object"));
+    }
+  }
+  return s;
+}
+
+void printStructureScore(const StructureScore& s) {
+  for (const auto& f : s.findings) std::printf("%s\n", f.c_str());
+  line("placements (raw segments in the database)", std::to_string(s.placements));
+  line("dominant planes (sessions with a scene)",
+       absl::StrFormat("%d (%d)", s.planes, s.sessions_with_scene));
+  line("  placements on them / of them flagged structure",
+       absl::StrFormat("%d / %d", s.on_planes, s.on_planes_flagged));
+  line("models from >= 2 segments", std::to_string(s.multi));
+  line("  of them at >= 2 places (not one surface under two labels)", std::to_string(s.multi_place));
+  line("structure merges (on a dominant plane, in a model of >= 2 places)",
+       std::to_string(s.structure_merges));
+}
+
+}  // namespace objdb::cli

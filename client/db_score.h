@@ -1,0 +1,76 @@
+// Scores of a database built from datasets, shared by `objdb report truth` and `objdb eval`:
+// against ground truth (instances/ + objects.json: the paper's table and models per true object
+// by kind), and, for data without it, structure merges: placements lying on the scene's dominant
+// planes inside models built from two or more segments.
+#pragma once
+
+#include <cstddef>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "client/db_scan.h"
+#include "core/common/status.h"
+#include "core/io/ground_truth.h"
+#include "storage/sqlite_store.h"
+
+namespace objdb::cli {
+
+// Ground-truth objects by session, then instance id (one id space per session).
+using GroundTruth = std::map<std::string, std::map<int, io::GroundTruthObject>>;
+
+// The objects.json of every dataset; FAILED_PRECONDITION naming the folder when one has no
+// instances/ folder, objects.json's own errors when it is missing or malformed.
+StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets);
+
+struct TruthScore {
+  size_t placements = 0;          // raw segments in the database
+  size_t known = 0;               // with >= 50 % of their points on one instance
+  size_t planar = 0, structure = 0;  // the database's flags
+  size_t on_structure = 0, on_structure_flagged = 0;  // on true floor/walls; of them flagged
+  size_t mergeable = 0;           // neither planar nor structure
+  size_t models = 0;              // active models
+  size_t multi = 0;               // models from >= 2 segments
+  size_t multi_place = 0;         // of them with >= 2 places (not all one surface, cli::places)
+  size_t erroneous = 0;           // multi-segment models whose kinds differ
+  size_t structure_merges = 0;    // multi-segment models holding true structure
+  // Mergeable segments of kinds with two or more of them, and those sharing their model with
+  // another of their kind at another place (the paper's recall).
+  size_t repeated = 0, with_kind = 0;
+  std::vector<std::string> findings;  // one line per erroneous or structure merge
+  struct Kind {
+    std::string kind;
+    size_t objects = 0, segments = 0;
+    double models_per_object = 0.0;
+  };
+  std::vector<Kind> kinds;  // by name
+};
+
+// `rows`: every model (loadRows with min_placements 1) scanned over the sessions' frames.
+TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth);
+void printTruthScore(const TruthScore& score);
+
+struct StructureScore {
+  size_t sessions_with_scene = 0;
+  size_t planes = 0;              // dominant planes found over all sessions' scenes
+  size_t placements = 0;
+  size_t on_planes = 0, on_planes_flagged = 0;  // placements on dominant planes; flagged structure
+  size_t multi = 0;               // models from >= 2 segments
+  size_t multi_place = 0;         // of them with >= 2 places (cli::places)
+  // Models with >= 2 places holding a placement on a dominant plane: structure matched like an
+  // object. (One surface under two labels at one place is not a merge of two things.)
+  size_t structure_merges = 0;
+  std::vector<std::string> findings;  // one line per structure merge
+};
+
+// Dominant planes of a session's scene: of the 8 largest planes of its surface voxels (|distance|
+// <= half a voxel, observed; fitted within two voxels), those holding at least 2 % of them, and
+// of each its connected faces covering at least 1 m² (bigger than an object's face; table tops
+// at one height are one plane but separate faces). A placement lies on them when at least half
+// of its model points fall within one voxel of their surface voxels.
+// Sessions without a stored scene are skipped (counted in sessions_with_scene).
+StatusOr<StructureScore> scoreStructure(const storage::SqliteStore& store,
+                                        const std::vector<Row>& rows);
+void printStructureScore(const StructureScore& score);
+
+}  // namespace objdb::cli
