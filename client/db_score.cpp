@@ -279,6 +279,8 @@ StatusOr<StructureScore> scoreStructure(const storage::SqliteStore& store,
     bool on_any = false;
     for (const Placement& p : row.placements) {
       ++s.placements;
+      s.planar += row.summary.planar ? 1 : 0;
+      s.structure += row.summary.structure ? 1 : 0;
       const auto it = planes.find(p.session);
       if (it == planes.end() || row.points.empty()) continue;
       size_t on = 0;
@@ -318,6 +320,8 @@ StatusOr<StructureScore> scoreStructure(const storage::SqliteStore& store,
 void printStructureScore(const StructureScore& s) {
   for (const auto& f : s.findings) std::printf("%s\n", f.c_str());
   line("placements (raw segments in the database)", std::to_string(s.placements));
+  line("  planar / structure (the database's flags)",
+       absl::StrFormat("%d / %d", s.planar, s.structure));
   line("dominant planes (sessions with a scene)",
        absl::StrFormat("%d (%d)", s.planes, s.sessions_with_scene));
   line("  placements on them / of them flagged structure",

@@ -54,6 +54,7 @@ struct StructureScore {
   size_t sessions_with_scene = 0;
   size_t planes = 0;              // dominant planes found over all sessions' scenes
   size_t placements = 0;
+  size_t planar = 0, structure = 0;  // placements the database flagged planar / structure
   size_t on_planes = 0, on_planes_flagged = 0;  // placements on dominant planes; flagged structure
   size_t multi = 0;               // models from >= 2 segments
   size_t multi_place = 0;         // of them with >= 2 places (cli::places)

@@ -114,19 +114,26 @@ StatusOr<float> ObjectDatabase::growInScene(const std::string& session,
                          sceneOf(session, live));
   if (scene == nullptr) return 0.0f;  // no scene yet: the segment's own planes decided
   const Eigen::Isometry3f T = incoming.observations.front().T_world_object.cast<float>();
-  const Eigen::Vector3f n = T.linear() * incoming.plane.head<3>();
-  const Eigen::Vector4f plane_world(n.x(), n.y(), n.z(),
-                                    incoming.plane.w() - n.dot(T.translation()));
-  std::vector<Eigen::Vector3f> seeds;
-  for (const auto& q : incoming.cloud.points) {
-    if (std::abs(incoming.plane.head<3>().dot(q) + incoming.plane.w()) <=
-        incoming.plane_distance_m) {
-      seeds.push_back(T * q);
+  // Every plane holding a good share of the segment: a floor with a strip of wall on it grows
+  // over the floor whichever of the two pieces is the bigger.
+  std::vector<Eigen::Vector4f> planes = incoming.shared_planes;
+  if (planes.empty()) planes.push_back(incoming.plane);
+  float span = 0.0f;
+  for (const Eigen::Vector4f& plane : planes) {
+    const Eigen::Vector3f n = T.linear() * plane.head<3>();
+    const Eigen::Vector4f plane_world(n.x(), n.y(), n.z(), plane.w() - n.dot(T.translation()));
+    std::vector<Eigen::Vector3f> seeds;
+    for (const auto& q : incoming.cloud.points) {
+      if (std::abs(plane.head<3>().dot(q) + plane.w()) <= incoming.plane_distance_m) {
+        seeds.push_back(T * q);
+      }
     }
+    const model::GrownPlane grown =
+        model::growPlaneInScene(*scene, plane_world, seeds, incoming.plane_distance_m);
+    span = std::max(span, grown.span_m[0]);
+    if (span >= p.structure_min_extent_m) break;  // structure: no need to grow the rest
   }
-  const model::GrownPlane grown =
-      model::growPlaneInScene(*scene, plane_world, seeds, incoming.plane_distance_m);
-  return grown.span_m[0];
+  return span;
 }
 
 Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_id) {

@@ -179,6 +179,7 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
       classifySurface(model.cloud, params.observation_depth_m, params.model);
   model.plane_inlier_ratio = shape.plane_inlier_ratio;
   model.plane = shape.plane;
+  model.shared_planes = shape.shared_planes;
   model.plane_distance_m = shape.plane_distance_m;
   model.planar = shape.planar;
   model.structure = shape.structure;

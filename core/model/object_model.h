@@ -67,6 +67,9 @@ struct ObjectModel {
   bool structure = false;                  // room structure (structure.h): stored, never matched
   float plane_inlier_ratio = 0.0f;         // share of points on the best plane
   Eigen::Vector4f plane = Eigen::Vector4f::Zero();  // that plane (model frame; not stored)
+  // The planes holding at least structure_min_share of the points, best first (SurfaceClass;
+  // model frame; not stored): each is grown through the scene for the structure test.
+  std::vector<Eigen::Vector4f> shared_planes;
   float plane_distance_m = 0.0f;           // the inlier distance it was found with (not stored)
   BuildTimings timings;
 

@@ -70,6 +70,7 @@ SurfaceClass classifySurface(const PointCloud& cloud, float depth_m, const Model
   if (params.structure_max_planes <= 0) return out;
   for (const PlanePiece& plane : planes) {
     const float share = float(plane.inliers.size()) / float(n);
+    if (share >= params.structure_min_share) out.shared_planes.push_back(plane.coefficients);
     float spans[2];
     planeSpans(
         plane.inliers.size(), [&](size_t i) { return cloud.points[plane.inliers[i]]; },

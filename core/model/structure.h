@@ -30,6 +30,9 @@ struct SurfaceClass {
   int planes = 0;                  // planes found (at most structure_max_planes)
   // The best plane (n·p + d = 0, |n| = 1, the cloud's frame), for growing it through the scene.
   Eigen::Vector4f plane = Eigen::Vector4f::Zero();
+  // Every plane found holding at least structure_min_share of the points, best first: each is
+  // grown through the scene (a floor plus a strip of wall: both pieces, either may be the big one).
+  std::vector<Eigen::Vector4f> shared_planes;
 };
 
 // Classifies a surface cloud seen from `depth_m` (0 = unknown: the plane_distance_m floor).

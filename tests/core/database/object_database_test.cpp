@@ -172,6 +172,34 @@ TEST(ObjectDatabase, StructureSegmentsAreStoredAsSuchButNeverMatched) {
   EXPECT_TRUE(c->matchable);
 }
 
+// A piece of a room corner cut out by segmentation: a strip of floor and a (bigger) strip of the
+// wall above it, each under a metre. Grown through the scene, the wall stays a 0.45 m strip (only
+// its bottom was observed), the floor grows over the room: structure. Growing only the best
+// plane (the wall) would have let it be matched like an object.
+TEST(ObjectDatabase, APieceOfAFloorAndAWallStripIsStructureWhenTheFloorGrowsOverTheRoom) {
+  Fixture f;
+  const Sdf room = objdb::testing::unionSdf({boxSdf({0, 0, -0.05f}, {1.2f, 1.2f, 0.05f}),
+                                             boxSdf({0, 1.25f, 0.225f}, {1.2f, 0.05f, 0.225f})});
+  auto scene = sdfGrid(room, Eigen::Vector3f(-1.3f, -1.3f, -0.2f), Eigen::Vector3f(1.3f, 1.4f, 0.4f),
+                       kVoxel, kBand);
+  ASSERT_TRUE(f.store.putScene("s", std::make_shared<tsdf::TsdfLayer>(std::move(scene.layer))).ok());
+  auto piece = sdfGrid(room, Eigen::Vector3f(-0.5f, 0.8f, -0.2f), Eigen::Vector3f(0.5f, 1.35f, 0.5f),
+                       kVoxel, kBand);
+  gsm::RawSegment raw{5, Transform::Identity(), std::move(piece.layer), {}, 0, 0};
+  for (const auto& v : piece.surface_voxels) {
+    const Eigen::Vector3f p = raw.grid.voxelCenter(v);
+    const bool floor = std::abs(p.z()) < 0.015f && p.y() > 0.85f && p.y() < 1.19f;
+    const bool wall = p.y() < 1.21f && p.y() > 1.17f && p.z() > 0.0f && p.z() < 0.45f;
+    if (std::abs(p.x()) < 0.4f && (floor || wall)) raw.label_voxels.push_back(v);
+  }
+  ASSERT_GT(raw.label_voxels.size(), 100u);
+  auto r = f.db->insertSegment("s", raw);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_TRUE(r->structure) << "grown to " << r->grown_plane_span_m << " m";
+  EXPECT_GE(r->grown_plane_span_m, 1.0f);
+  EXPECT_FALSE(r->matchable);
+}
+
 TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
   Fixture f;
   const World& a = kMonday;
