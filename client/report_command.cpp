@@ -194,7 +194,9 @@ int merges(int argc, char** argv) {
     cv::rectangle(info, cv::Rect(0, 0, kInfoWidth, kRowHeight), cv::Scalar(70, 70, 70), 1);
     const auto& s = row.summary;
     const Eigen::Vector3d e = s.bbox_max - s.bbox_min;
-    text(&info, absl::StrFormat("object %d: %d placements, %s", s.id, s.observations.size(),
+    const size_t places = cli::places(row);
+    text(&info, absl::StrFormat("object %d: %d segments at %d place%s, %s", s.id,
+                                s.observations.size(), places, places == 1 ? "" : "s",
                                 s.structure ? "STRUCTURE" : s.planar ? "planar" : "object"),
          8, 20, 0.55);
     text(&info, absl::StrFormat("extent %.2f x %.2f x %.2f m, %d points", e.x(), e.y(), e.z(),
