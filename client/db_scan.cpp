@@ -53,7 +53,10 @@ StatusOr<std::vector<Row>> loadRows(const storage::SqliteStore& store, size_t mi
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(std::vector<storage::ModelSummary> page, store.modelSummaries(query));
     for (auto& m : page) {
-      if (m.observations.size() >= min_placements) rows.push_back({std::move(m), {}, {}, {}});
+      if (m.observations.size() < min_placements) continue;
+      Row row;
+      row.summary = std::move(m);
+      rows.push_back(std::move(row));
     }
     if (page.size() < query.limit) break;
     query.after_id = page.back().id;

@@ -24,9 +24,32 @@ StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& 
           "its merges",
           folder));
     }
-    OBJDB_ASSIGN_OR_RETURN(std::vector<io::GroundTruthObject> read,
-                           io::readObjectsJson(std::filesystem::path(folder) / "objects.json"));
-    for (auto& g : read) objects[session][g.id] = g;
+    const std::filesystem::path json = std::filesystem::path(folder) / "objects.json";
+    std::error_code ec;
+    if (std::filesystem::exists(json, ec)) {
+      OBJDB_ASSIGN_OR_RETURN(std::vector<io::GroundTruthObject> read, io::readObjectsJson(json));
+      for (auto& g : read) objects[session][g.id] = g;
+      continue;
+    }
+    // Class labels without objects.json (label-fusion's labels/): every id is one object of kind
+    // "label <id>"; nothing is structure.
+    std::set<int> ids;
+    for (size_t f = 0; f < ds->size(); ++f) {
+      OBJDB_ASSIGN_OR_RETURN(const Frame frame, ds->loadFrame(f));
+      if (!frame.instances) continue;
+      for (const uint16_t id : frame.instances->data) {
+        if (id != 0) ids.insert(int(id));
+      }
+    }
+    std::fprintf(stderr, "session %s: no objects.json; its %zu ids are one object of kind \"label "
+                         "<id>\" each\n",
+                 session.c_str(), ids.size());
+    for (const int id : ids) {
+      io::GroundTruthObject g;
+      g.id = id;
+      g.category = absl::StrFormat("label %d", id);
+      objects[session][id] = g;
+    }
   }
   return objects;
 }

@@ -20,7 +20,9 @@ namespace objdb::cli {
 using GroundTruth = std::map<std::string, std::map<int, io::GroundTruthObject>>;
 
 // The objects.json of every dataset; FAILED_PRECONDITION naming the folder when one has no
-// instances/ folder, objects.json's own errors when it is missing or malformed.
+// instances (instances/, or a TUM sequence's labels/), objects.json's own errors when it is
+// malformed. Without an objects.json every id seen in the frames is one object of kind
+// "label <id>" (class labels, as label-fusion's labels/ hold them).
 StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets);
 
 struct TruthScore {

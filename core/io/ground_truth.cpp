@@ -144,7 +144,7 @@ Status writeObjectsJson(const fs::path& path, const std::vector<GroundTruthObjec
 }
 
 StatusOr<InstanceImage> readInstanceImage(const fs::path& path, const Intrinsics& intrinsics) {
-  OBJDB_ASSIGN_OR_RETURN(InstanceImage instances, readUint16Png(path));
+  OBJDB_ASSIGN_OR_RETURN(InstanceImage instances, readIdPng(path));
   OBJDB_RETURN_IF_ERROR(intrinsics.checkImageSize(instances.width, instances.height,
                                                   absl::StrCat("instances image ", path.string())));
   return instances;

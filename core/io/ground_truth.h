@@ -32,8 +32,8 @@ StatusOr<std::vector<GroundTruthObject>> readObjectsJson(const std::filesystem::
 Status writeObjectsJson(const std::filesystem::path& path,
                         const std::vector<GroundTruthObject>& objects);
 
-// One frame's instances image (16-bit PNG); NotFound when missing, and an error naming the file
-// unless it is exactly intrinsics.width × intrinsics.height.
+// One frame's instances image (16- or 8-bit single-channel PNG); NotFound when missing, and an
+// error naming the file unless it is exactly intrinsics.width × intrinsics.height.
 StatusOr<InstanceImage> readInstanceImage(const std::filesystem::path& path,
                                           const Intrinsics& intrinsics);
 

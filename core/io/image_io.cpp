@@ -261,6 +261,33 @@ StatusOr<RawDepthImage> readUint16Png(const fs::path& path) {
   return decodeUint16Png(bytes, path.string());
 }
 
+StatusOr<Image<uint16_t>> readIdPng(const fs::path& path) {
+  OBJDB_ASSIGN_OR_RETURN(const std::string bytes, readImageFile(path));
+  const std::string name = path.string();
+  OBJDB_ASSIGN_OR_RETURN(const HeaderInfo header, readHeader(bytes, name));
+  if (header.format != FileFormat::kPng || header.bit_depth != 8) {
+    return decodeUint16Png(bytes, name);  // 16-bit, or the error saying what it is instead
+  }
+  OBJDB_RETURN_IF_ERROR(checkHeaderSize(name, header));
+  if (header.channels != 1) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s has %d channels; expected a single-channel 8- or 16-bit id image", name,
+        header.channels));
+  }
+  OBJDB_ASSIGN_OR_RETURN(const cv::Mat mat, decode(bytes, name));
+  if (mat.depth() != CV_8U || mat.channels() != 1) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s decodes as %s with %d channels; expected a single-channel id image", name,
+        depthName(mat.depth()), mat.channels()));
+  }
+  Image<uint16_t> image(mat.cols, mat.rows);
+  for (int v = 0; v < mat.rows; ++v) {
+    const uint8_t* row = mat.ptr<uint8_t>(v);
+    for (int u = 0; u < mat.cols; ++u) image.at(u, v) = row[u];
+  }
+  return image;
+}
+
 Status writeUint16Png(const fs::path& path, const Image<uint16_t>& image) {
   OBJDB_RETURN_IF_ERROR(checkImageForWrite(path, image.width, image.height, image.data.size()));
   const cv::Mat mat(image.height, image.width, CV_16UC1, const_cast<uint16_t*>(image.data.data()));

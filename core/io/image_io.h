@@ -18,6 +18,9 @@ StatusOr<RawDepthImage> readUint16Png(const std::filesystem::path& path);
 StatusOr<RawDepthImage> decodeUint16Png(std::string_view bytes, const std::string& name,
                                         int expect_width = 0, int expect_height = 0);
 Status writeUint16Png(const std::filesystem::path& path, const Image<uint16_t>& image);
+// An id image (ground-truth instances or class labels): a single-channel PNG of 16 or 8 bits
+// (label-fusion's labels/ are 8-bit), as 16-bit ids.
+StatusOr<Image<uint16_t>> readIdPng(const std::filesystem::path& path);
 
 // 8-bit colour image (PNG or JPEG, 3 channels; grey images are expanded), RGB order.
 StatusOr<ColorImage> readColorImage(const std::filesystem::path& path);

@@ -189,7 +189,12 @@ StatusOr<std::unique_ptr<TumDataset>> TumDataset::open(const fs::path& root,
     OBJDB_ASSIGN_OR_RETURN(rgb_list, readTumList(rgb_path));
   }
 
-  dataset->has_instances_ = fs::is_directory(root / "instances", ec);
+  for (const char* folder : {"instances", "labels"}) {
+    if (!dataset->has_instances_ && fs::is_directory(root / folder, ec)) {
+      dataset->has_instances_ = true;
+      dataset->instances_folder_ = folder;
+    }
+  }
   const fs::path objects_path = root / "objects.json";
   if (fs::exists(objects_path, ec)) {
     OBJDB_ASSIGN_OR_RETURN(dataset->objects_, readObjectsJson(objects_path));
@@ -252,7 +257,7 @@ StatusOr<Frame> TumDataset::loadFrame(size_t i) const {
   if (has_instances_) {
     const fs::path name = depth_path.stem().string() + ".png";
     OBJDB_ASSIGN_OR_RETURN(frame.instances,
-                           readInstanceImage(root_ / "instances" / name, intrinsics_));
+                           readInstanceImage(root_ / instances_folder_ / name, intrinsics_));
   }
   return frame;
 }

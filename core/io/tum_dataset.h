@@ -7,7 +7,9 @@
 // are skipped and counted (framesWithoutPose()).
 // Ground-truth variant: an instances/ folder with one 16-bit instance-id PNG per depth image (same
 // file name: instances/NNNNNN.png for depth/NNNNNN.png) and an objects.json, both exactly as in
-// the objdb layout (ground_truth.h).
+// the objdb layout (ground_truth.h). Without instances/, a labels/ folder of per-pixel class ids
+// (label-fusion's layout, 8- or 16-bit, 0 = background) serves as the instances; without an
+// objects.json each id is then one object of kind "label <id>" (idObjects below).
 #pragma once
 
 #include <filesystem>
@@ -49,6 +51,8 @@ class TumDataset : public Dataset {
   size_t framesWithoutPose() const { return frames_without_pose_; }
   // Ground-truth objects (empty when objects.json is absent).
   const std::vector<GroundTruthObject>& objects() const { return objects_; }
+  // The folder the instances come from: "instances" or "labels" (empty: none).
+  const std::string& instancesFolder() const { return instances_folder_; }
 
  private:
   struct Associated {
@@ -61,7 +65,8 @@ class TumDataset : public Dataset {
   double depth_factor_ = kTumDepthFactor;
   std::vector<Associated> frames_;
   bool has_color_ = false;
-  bool has_instances_ = false;  // instances/ exists: every frame must have its image
+  bool has_instances_ = false;  // instances/ or labels/ exists: every frame must have its image
+  std::string instances_folder_;
   std::vector<GroundTruthObject> objects_;
   size_t frames_without_pose_ = 0;
 };

@@ -148,9 +148,9 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
     const tsdf::TsdfLayer& map = session.map->tsdf();
     RawSegmentJob job{gsm::RawSegment{label, Transform::Identity(),
                                       tsdf::TsdfLayer::create(map.voxelSize(), map.voxelsPerSide())
-                                          .value()},
-                      reason, session.last_index, nullptr};
-    job.withdraw = true;  // the segment carries only its label
+                                          .value(),
+                                      {}, 0, 0, 0.0f},
+                      reason, session.last_index, nullptr, /*withdraw=*/true};  // label only
     jobs.push_back(std::move(job));
   }
   if (segments.empty()) return jobs;
@@ -163,7 +163,7 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
     const size_t frame = size_t(std::max<int64_t>(segment.last_update_frame, 0));
     const uint64_t index =
         frame < session.frame_indices.size() ? session.frame_indices[frame] : session.last_index;
-    jobs.push_back({std::move(segment), reason, index, scene});
+    jobs.push_back({std::move(segment), reason, index, scene, /*withdraw=*/false});
   }
   return jobs;
 }

@@ -7,6 +7,8 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "core/io/image_io.h"
 #include "tests/support/temp_dir.h"
@@ -240,6 +242,41 @@ TEST(TumDataset, InstancesFolderGivesEachFrameItsGroundTruthImage) {
     EXPECT_EQ(frame->instances->at(7, 5), 65535);
     EXPECT_FLOAT_EQ(frame->depth.at(0, 0), 1.0f + 0.05f * float(depth_file[i]));
   }
+}
+
+// label-fusion's layout: labels/<depth stem>.png of 8-bit class ids and no objects.json serve as
+// the instances; a colour image there is an error naming it.
+TEST(TumDataset, LabelsFolderOf8BitClassIdsServesAsInstances) {
+  TempDir dir;
+  fs::copy(kSample, dir.path(), fs::copy_options::recursive);
+  fs::create_directories(dir / "labels");
+  for (int k = 0; k < 4; ++k) {
+    cv::Mat labels(6, 8, CV_8UC1);
+    for (int v = 0; v < 6; ++v) {
+      for (int u = 0; u < 8; ++u) labels.at<uint8_t>(v, u) = uint8_t(40 * k + 8 * v + u);
+    }
+    ASSERT_TRUE(cv::imwrite((dir / "labels" / (std::string(kSampleDepthStems[k]) + ".png")).string(),
+                            labels));
+  }
+  const auto opened = openDataset(dir.path());
+  ASSERT_TRUE(opened.ok()) << opened.status();
+  const auto& dataset = dynamic_cast<const TumDataset&>(**opened);
+  EXPECT_TRUE(dataset.hasInstances());
+  EXPECT_EQ(dataset.instancesFolder(), "labels");
+  EXPECT_TRUE(dataset.objects().empty());
+  const auto frame = dataset.loadFrame(2);  // depth image 3
+  ASSERT_TRUE(frame.ok()) << frame.status();
+  ASSERT_TRUE(frame->instances.has_value());
+  EXPECT_EQ(frame->instances->at(3, 2), 40 * 3 + 8 * 2 + 3);
+  EXPECT_EQ(frame->instances->at(7, 5), 40 * 3 + 8 * 5 + 7);
+  // A colour image is no id image.
+  cv::Mat colour(6, 8, CV_8UC3, cv::Scalar(1, 2, 3));
+  const fs::path bad = dir / "labels" / "100.000000.png";
+  ASSERT_TRUE(cv::imwrite(bad.string(), colour));
+  const auto broken = dataset.loadFrame(0);
+  ASSERT_FALSE(broken.ok());
+  EXPECT_THAT(std::string(broken.status().message()), HasSubstr(bad.string()));
+  EXPECT_THAT(std::string(broken.status().message()), HasSubstr("3 channels"));
 }
 
 TEST(TumDataset, WithoutGroundTruthFramesHaveNoInstances) {
