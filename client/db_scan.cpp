@@ -55,6 +55,7 @@ StatusOr<std::vector<Row>> loadRows(const storage::SqliteStore& store, size_t mi
     for (auto& m : page) {
       if (m.observations.size() < min_placements) continue;
       Row row;
+      row.centre = 0.5 * (m.bbox_min + m.bbox_max);  // model::placeCentre of its cloud
       row.summary = std::move(m);
       rows.push_back(std::move(row));
     }
@@ -70,8 +71,6 @@ StatusOr<std::vector<Row>> loadRows(const storage::SqliteStore& store, size_t mi
     const auto& cloud = model->cloud.points;
     const size_t step = std::max<size_t>(1, cloud.size() / kMaxScanPoints);
     for (size_t i = 0; i < cloud.size(); i += step) row.points.push_back(cloud[i]);
-    for (const auto& p : cloud) row.centre += p.cast<double>();
-    if (!cloud.empty()) row.centre /= double(cloud.size());
     OBJDB_ASSIGN_OR_RETURN(row.merges, store.mergeRecordsInto(row.summary.id));
     for (const auto& o : row.summary.observations) {
       Placement p;

@@ -36,7 +36,7 @@ struct Placement {
 struct Row {
   storage::ModelSummary summary;
   std::vector<Eigen::Vector3f> points;  // model frame, at most kMaxScanPoints
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // of the points
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();  // model::placeCentre (its bounds' middle)
   std::vector<database::MergeRecord> merges;
   std::vector<Placement> placements;
 };

@@ -126,10 +126,12 @@ int runEvalCommand(int argc, char** argv) {
   auto sessions = cli::datasetSessions(o.datasets);
   if (!sessions.ok()) return cli::reportError(kCommand, sessions.status());
   std::map<std::string, std::string> folders;  // session → folder
+  std::vector<std::unique_ptr<io::Dataset>> datasets;  // in session order
   bool with_truth = true;
   for (const auto& [name, path] : *sessions) {
     auto opened = io::openDataset(path);  // every folder is readable before anything starts
     if (!opened.ok()) return cli::reportError(kCommand, opened.status());
+    datasets.push_back(*std::move(opened));
     if (folders.count(name) != 0) {
       return cli::reportError(kCommand, absl::InvalidArgumentError(absl::StrFormat(
                                             "two datasets are named %s (%s and %s): sessions are "
@@ -137,7 +139,7 @@ int runEvalCommand(int argc, char** argv) {
                                             name, folders[name], path.string())));
     }
     folders[name] = path.string();
-    with_truth = with_truth && (*opened)->hasInstances();
+    with_truth = with_truth && datasets.back()->hasInstances();
   }
   cli::GroundTruth truth;
   if (with_truth) {
@@ -183,11 +185,10 @@ int runEvalCommand(int argc, char** argv) {
   stream.every = o.every;
   const auto start = std::chrono::steady_clock::now();
   std::vector<std::pair<std::string, double>> walls;
-  for (const auto& [name, path] : *sessions) {
-    auto opened = io::openDataset(path);
-    if (!opened.ok()) return cli::reportError(kCommand, opened.status());
+  for (size_t i = 0; i < sessions->size(); ++i) {
+    const std::string& name = (*sessions)[i].first;
     const auto t = std::chrono::steady_clock::now();
-    if (const int rc = cli::streamSession(*stub, name, **opened, stream, kCommand); rc != 0) {
+    if (const int rc = cli::streamSession(*stub, name, *datasets[i], stream, kCommand); rc != 0) {
       return rc;
     }
     walls.emplace_back(name, secondsSince(t));

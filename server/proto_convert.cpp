@@ -390,6 +390,7 @@ void toProto(const storage::ModelSummary& model, v1::ObjectSummary* out) {
   out->set_num_poses(uint32_t(model.observations.size()));
   std::vector<std::pair<std::string, Transform>> poses;
   for (const auto& o : model.observations) poses.emplace_back(o.session, o.T_world_object);
+  // The bounds' middle is model::placeCentre of the stored cloud.
   out->set_num_places(
       uint32_t(model::countPlaces(poses, 0.5 * (model.bbox_min + model.bbox_max))));
   setVector(model.bbox_min, out->mutable_bounds_object()->mutable_min());

@@ -250,16 +250,12 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
 
   // One surface under two GSM labels of one session: the registration puts the candidate's
   // centre where one of its placements of this session already has it.
-  if (!candidate.cloud.points.empty()) {
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (const auto& p : candidate.cloud.points) centre += p.cast<double>();
-    centre /= double(candidate.cloud.points.size());
-    for (const auto& in : incoming.observations) {
-      for (const auto& o : candidate.observations) {
-        result.same_place = result.same_place ||
-                            model::samePlace(in.session, in.T_world_object * T_i_j, o.session,
-                                             o.T_world_object, centre);
-      }
+  const Eigen::Vector3d centre = model::placeCentre(candidate.cloud);
+  for (const auto& in : incoming.observations) {
+    for (const auto& o : candidate.observations) {
+      result.same_place = result.same_place ||
+                          model::samePlace(in.session, in.T_world_object * T_i_j, o.session,
+                                           o.T_world_object, centre);
     }
   }
 

@@ -18,6 +18,16 @@ bool samePlace(const std::string& session_a, const Transform& T_world_a,
   return session_a == session_b && (T_world_a * centre - T_world_b * centre).norm() < kSamePlaceM;
 }
 
+Eigen::Vector3d placeCentre(const PointCloud& cloud) {
+  if (cloud.points.empty()) return Eigen::Vector3d::Zero();
+  Eigen::Vector3f lo = cloud.points.front(), hi = lo;
+  for (const auto& p : cloud.points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  return 0.5 * (lo + hi).cast<double>();
+}
+
 size_t countPlaces(const std::vector<std::pair<std::string, Transform>>& poses,
                    const Eigen::Vector3d& centre) {
   size_t places = 0;

@@ -47,6 +47,9 @@ bool samePlace(const std::string& session_a, const Transform& T_world_a,
 // one at its place.
 size_t countPlaces(const std::vector<std::pair<std::string, Transform>>& poses,
                    const Eigen::Vector3d& centre);
+// The centre those compare: the middle of the model cloud's bounding box (a stored model's
+// bounds, storage::ModelSummary::bbox_min/max, give the same point). Zero for an empty cloud.
+Eigen::Vector3d placeCentre(const PointCloud& cloud);
 
 // Time spent building a model, ms (paper table II: P, K, D).
 struct BuildTimings {

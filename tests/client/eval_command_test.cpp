@@ -21,12 +21,8 @@ namespace fs = std::filesystem;
 
 const std::string kObjdb = OBJDB_CLIENT_BINARY;
 
-// The value after `what` on its line of `text`, "(missing)" when absent.
 std::string row(const std::string& text, const std::string& what) {
-  const size_t at = text.find(what);
-  if (at == std::string::npos) return "(missing)";
-  const size_t end = text.find('\n', at);
-  return text.substr(at + what.size(), end - at - what.size());
+  return testing::valueAfter(text, what);
 }
 
 int count(const std::string& text, const std::string& what) {

@@ -52,12 +52,7 @@ TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
   r = runProcess({kObjdb, "report", "truth", "--db", db.string(), (sessions / "monday").string(),
                   (sessions / "tuesday").string()});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
-  auto row = [&](const std::string& what) {
-    const size_t at = r.out.find(what);
-    if (at == std::string::npos) return std::string("(missing)");
-    const size_t end = r.out.find('\n', at);
-    return r.out.substr(at + what.size(), end - at - what.size());
-  };
+  auto row = [&](const std::string& what) { return testing::valueAfter(r.out, what); };
   EXPECT_EQ(std::stoi(row("models from >= 2 segments")), 2) << r.out;
   EXPECT_EQ(std::stoi(row("erroneous merges (kinds differ)")), 0) << r.out;
   EXPECT_NE(row("repeated kinds' mergeable segments with their kind elsewhere").find("100 % (4 of 4)"),

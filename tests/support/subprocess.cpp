@@ -148,4 +148,12 @@ ProcessResult runProcess(const std::vector<std::string>& argv, std::chrono::mill
   return child.wait(timeout);
 }
 
+std::string valueAfter(const std::string& text, const std::string& what) {
+  const size_t at = text.find(what);
+  if (at == std::string::npos) return "(missing)";
+  const size_t end = text.find('\n', at);
+  return text.substr(at + what.size(), end == std::string::npos ? std::string::npos
+                                                                 : end - at - what.size());
+}
+
 }  // namespace objdb::testing

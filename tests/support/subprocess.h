@@ -57,4 +57,8 @@ class ChildProcess {
 ProcessResult runProcess(const std::vector<std::string>& argv,
                          std::chrono::milliseconds timeout = std::chrono::seconds(60));
 
+// The rest of the line of `text` after the first occurrence of `what` (a command's report line
+// "label   value"); "(missing)" when `what` does not occur.
+std::string valueAfter(const std::string& text, const std::string& what);
+
 }  // namespace objdb::testing

@@ -239,9 +239,7 @@ TEST(ObjectDatabase, OneSurfaceUnderTwoLabelsOfOneSessionIsOnePlacement) {
   EXPECT_TRUE(second->results[0].same_place);
   auto model = f.store.model(first->model_id).value();
   ASSERT_EQ(model->observations.size(), 2u);
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (const auto& p : model->cloud.points) centre += p.cast<double>();
-  centre /= double(model->cloud.points.size());
+  const Eigen::Vector3d centre = model::placeCentre(model->cloud);
   auto poses = [&] {
     std::vector<std::pair<std::string, Transform>> out;
     for (const auto& o : f.store.model(first->model_id).value()->observations) {
