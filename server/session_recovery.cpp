@@ -93,7 +93,7 @@ Status ObjectDatabaseService::recoverSession(const storage::SessionInfo& stored)
                          stored.name, saved.frames);
   const gsm::LabelBlocks no_labels;
   const std::vector<gsm::RawSegment> segments = gsm::extractLabelled(
-      *saved.map, saved.labels ? *saved.labels : no_labels, params.gsm.min_label_voxels,
+      *saved.map, saved.labels ? *saved.labels : no_labels, params.gsm,
       int(std::ceil(params.tsdf.truncation_voxels)), saved.frames);
   size_t inserted = 0, unchanged = 0;
   for (const gsm::RawSegment& segment : segments) {

@@ -64,7 +64,14 @@ Status GsmParams::validate() const {
       inRange(association_overlap_ratio, 0.0, 1.0, "gsm.association_overlap_ratio"));
   OBJDB_RETURN_IF_ERROR(inRange(merge_min_frames, 1, 1 << 20, "gsm.merge_min_frames"));
   OBJDB_RETURN_IF_ERROR(inRange(merge_min_joint_share, 0.0, 1.0, "gsm.merge_min_joint_share"));
-  return inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames");
+  OBJDB_RETURN_IF_ERROR(inRange(extraction_age_frames, 1, 1 << 20, "gsm.extraction_age_frames"));
+  OBJDB_RETURN_IF_ERROR(inRange(object_gap_m, 0.0, 0.2, "gsm.object_gap_m"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(object_min_contact_voxels, 1, 1 << 20, "gsm.object_min_contact_voxels"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(object_structure_extent_m, 0.05, 100.0, "gsm.object_structure_extent_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(object_support_probe_m, 0.0, 5.0, "gsm.object_support_probe_m"));
+  return inRange(object_update_frames, 1, 1 << 20, "gsm.object_update_frames");
 }
 
 Status ModelParams::validate() const {

@@ -67,6 +67,20 @@ struct GsmParams {
   // recall 55 of 92 (was 53 of 90), 0 erroneous merges, completion precision 28 % → 38 %.
   float merge_min_joint_share = 0.5f;
   int extraction_age_frames = 10;        // a label untouched this long is extracted
+  // Whole objects (ours, issue 18; core/gsm/objects.h): above the convex labels, the labels that
+  // touch (voxels within object_gap_m) are grouped into objects, except across room structure
+  // (a planar label at least object_structure_extent_m wide along both in-plane axes) and
+  // across a support (a label resting on the face of a planar label that surrounds the contact
+  // on all four sides within object_support_probe_m: a mug on a table, a box on a shelf).
+  // `objects` true: the GSM extracts whole objects (a segment per group, with its parts);
+  // false: every label alone (the paper's segments). Groups are recomputed every
+  // object_update_frames frames (and at a flush); extraction runs then.
+  bool objects = true;
+  float object_gap_m = 0.02f;
+  int object_min_contact_voxels = 3;  // touching voxel pairs for two labels to connect
+  float object_structure_extent_m = 1.0f;
+  float object_support_probe_m = 0.3f;
+  int object_update_frames = 5;
   Status validate() const;
 };
 

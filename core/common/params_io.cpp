@@ -46,6 +46,12 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("merge_min_frames", p.merge_min_frames);
   fn("merge_min_joint_share", p.merge_min_joint_share);
   fn("extraction_age_frames", p.extraction_age_frames);
+  fn("objects", p.objects);
+  fn("object_gap_m", p.object_gap_m);
+  fn("object_min_contact_voxels", p.object_min_contact_voxels);
+  fn("object_structure_extent_m", p.object_structure_extent_m);
+  fn("object_support_probe_m", p.object_support_probe_m);
+  fn("object_update_frames", p.object_update_frames);
 }
 template <typename Fn>
 void forEachField(ModelParams& p, Fn&& fn) {

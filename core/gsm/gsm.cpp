@@ -407,7 +407,7 @@ RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
 }
 
 std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
-                                        int min_label_voxels, int margin, int64_t frame) {
+                                        const GsmParams& params, int margin, int64_t frame) {
   const int vps = layer.voxelsPerSide();
   absl::flat_hash_map<Label, std::vector<tsdf::BlockIndex>> blocks_of;
   for (const auto& [index, block] : labels) {
@@ -416,23 +416,70 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
       if (l != 0 && seen.insert(l).second) blocks_of[l].push_back(index);
     }
   }
-  std::vector<Label> order;
-  for (const auto& [label, unused] : blocks_of) order.push_back(label);
-  std::sort(order.begin(), order.end());
+  // One segment per object (its parts' voxels together), or per label.
+  std::map<Label, std::vector<Label>> groups;
+  if (params.objects) {
+    groups = groupObjects(layer, labels, params).members;
+  } else {
+    for (const auto& [label, unused] : blocks_of) groups[label] = {label};
+  }
   std::vector<RawSegment> segments;
-  for (const Label label : order) {
+  for (const auto& [id, parts] : groups) {
     std::vector<tsdf::VoxelIndex> voxels;
-    for (const tsdf::BlockIndex& b : blocks_of[label]) {
-      const std::vector<Label>& block = labels.at(b);
-      appendLabelVoxels(b, block.size(), vps, label, [&](size_t i) { return block[i]; }, &voxels);
+    for (const Label label : parts) {
+      for (const tsdf::BlockIndex& b : blocks_of[label]) {
+        const std::vector<Label>& block = labels.at(b);
+        appendLabelVoxels(b, block.size(), vps, label, [&](size_t i) { return block[i]; }, &voxels);
+      }
     }
-    if (voxels.size() < size_t(std::max(min_label_voxels, 1))) continue;
-    segments.push_back(extractRawSegment(layer, label, std::move(voxels), margin, frame, frame));
+    if (voxels.size() < size_t(std::max(params.min_label_voxels, 1))) continue;
+    segments.push_back(extractRawSegment(layer, id, std::move(voxels), margin, frame, frame));
+    segments.back().parts = parts;
   }
   return segments;
 }
 
 std::vector<RawSegment> Gsm::extractIdle(bool flush) {
+  return params_.objects ? extractIdleObjects(flush) : extractIdleLabels(flush);
+}
+
+ObjectGroups Gsm::groupObjects() const {
+  return gsm::groupObjects(layer_, mainLabelBlocks(), params_);
+}
+
+std::vector<tsdf::VoxelIndex> Gsm::voxelsOf(const std::vector<Label>& labels) const {
+  const int vps = layer_.voxelsPerSide();
+  absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;
+  for (const Label l : labels) {
+    const auto it = info_.find(l);
+    if (it != info_.end()) blocks.insert(it->second.blocks.begin(), it->second.blocks.end());
+  }
+  std::vector<tsdf::VoxelIndex> voxels;
+  for (const tsdf::BlockIndex& b : blocks) {
+    const auto it = label_blocks_.find(b);
+    if (it == label_blocks_.end()) continue;
+    const std::vector<LabelVoxel>& block = it->second;
+    for (size_t i = 0; i < block.size(); ++i) {
+      if (block[i].empty()) continue;
+      if (!std::binary_search(labels.begin(), labels.end(), mainOf(block[i]))) continue;
+      voxels.push_back(b * vps + Eigen::Vector3i(int(i % size_t(vps)), int((i / size_t(vps)) % size_t(vps)),
+                                                 int(i / size_t(vps * vps))));
+    }
+  }
+  return voxels;
+}
+
+float Gsm::observationDepth(const std::vector<tsdf::VoxelIndex>& voxels, int64_t frame) const {
+  if (voxels.empty() || frame < 0 || size_t(frame) >= camera_positions_.size()) return 0.0f;
+  const Eigen::Vector3f camera = camera_positions_[size_t(frame)];
+  std::vector<float> depths;
+  depths.reserve(voxels.size());
+  for (const auto& v : voxels) depths.push_back((layer_.voxelCenter(v) - camera).norm());
+  std::nth_element(depths.begin(), depths.begin() + long(depths.size() / 2), depths.end());
+  return depths[depths.size() / 2];
+}
+
+std::vector<RawSegment> Gsm::extractIdleLabels(bool flush) {
   std::vector<Label> ready;
   for (auto& [label, info] : info_) {
     if (info.extracted_frame >= 0 || info.last_update_frame < 0) continue;
@@ -448,38 +495,77 @@ std::vector<RawSegment> Gsm::extractIdle(bool flush) {
   }
   std::sort(ready.begin(), ready.end());
   std::vector<RawSegment> segments;
-  const int vps = layer_.voxelsPerSide();
   const int margin = int(std::ceil(tsdf_params_.truncation_voxels));
   for (const Label label : ready) {
     LabelInfo& info = info_[label];
     info.extracted_frame = frame_;
     // The label's voxels, found through its block index only (O(object), not O(map)).
-    std::vector<tsdf::VoxelIndex> voxels;
-    for (const tsdf::BlockIndex& b : info.blocks) {
-      const auto it = label_blocks_.find(b);
-      if (it == label_blocks_.end()) continue;
-      const std::vector<LabelVoxel>& block = it->second;
-      appendLabelVoxels(b, block.size(), vps, label,
-                        [&](size_t i) { return block[i].empty() ? Label{0} : mainOf(block[i]); },
-                        &voxels);
-    }
+    std::vector<tsdf::VoxelIndex> voxels = voxelsOf({label});
     if (voxels.size() < size_t(params_.min_label_voxels)) {
       if (info.extracted_voxels > 0) withdrawn_.push_back(label);
       info.extracted_voxels = 0;
       continue;
     }
     info.extracted_voxels = int64_t(voxels.size());
-    const size_t last = size_t(std::max<int64_t>(info.last_update_frame, 0));
-    const Eigen::Vector3f camera =
-        last < camera_positions_.size() ? camera_positions_[last] : Eigen::Vector3f::Zero();
-    std::vector<float> depths;
-    depths.reserve(voxels.size());
-    for (const auto& v : voxels) depths.push_back((layer_.voxelCenter(v) - camera).norm());
-    std::nth_element(depths.begin(), depths.begin() + long(depths.size() / 2), depths.end());
-    const float depth = depths[depths.size() / 2];
+    const float depth = observationDepth(voxels, info.last_update_frame);
     segments.push_back(extractRawSegment(layer_, label, std::move(voxels), margin,
                                          info.last_update_frame, frame_));
-    segments.back().observation_depth_m = last < camera_positions_.size() ? depth : 0.0f;
+    segments.back().observation_depth_m = depth;
+    segments.back().parts = {label};
+  }
+  return segments;
+}
+
+std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
+  if (flush || grouped_frame_ < 0 || frame_ - grouped_frame_ >= params_.object_update_frames) {
+    grouped_frame_ = frame_;
+    groups_ = groupObjects().members;
+    // An object extracted before whose id is no object now went into another (or vanished).
+    std::vector<Label> gone;
+    for (const auto& [id, extracted] : extracted_objects_) {
+      if (!groups_.count(id)) gone.push_back(id);
+    }
+    std::sort(gone.begin(), gone.end());
+    for (const Label id : gone) {
+      withdrawn_.push_back(id);
+      extracted_objects_.erase(id);
+    }
+  }
+  // Idleness is checked every frame, on the groups of the last regrouping (their labels resolved
+  // through the merges since).
+  std::vector<RawSegment> segments;
+  const int margin = int(std::ceil(tsdf_params_.truncation_voxels));
+  for (auto& [id, parts] : groups_) {
+    for (Label& l : parts) l = resolve(l);
+    std::sort(parts.begin(), parts.end());
+    parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
+    int64_t last_update = -1;
+    for (const Label l : parts) {
+      const auto it = info_.find(l);
+      if (it != info_.end()) last_update = std::max(last_update, it->second.last_update_frame);
+    }
+    if (last_update < 0) continue;
+    const bool idle = frame_ - 1 - last_update >= params_.extraction_age_frames;
+    if (!flush && !idle) continue;
+    const auto earlier = extracted_objects_.find(id);
+    if (earlier != extracted_objects_.end() && earlier->second.parts == parts &&
+        earlier->second.frame > last_update) {
+      continue;  // extracted since its last change
+    }
+    std::vector<tsdf::VoxelIndex> voxels = voxelsOf(parts);
+    if (voxels.size() < size_t(params_.min_label_voxels)) {
+      if (earlier != extracted_objects_.end()) {
+        withdrawn_.push_back(id);
+        extracted_objects_.erase(earlier);
+      }
+      continue;
+    }
+    extracted_objects_[id] = ExtractedObject{parts, frame_};
+    const float depth = observationDepth(voxels, last_update);
+    segments.push_back(
+        extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_));
+    segments.back().observation_depth_m = depth;
+    segments.back().parts = parts;
   }
   return segments;
 }

@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -17,6 +18,7 @@
 #include "absl/container/flat_hash_set.h"
 #include "core/common/params.h"
 #include "core/gsm/label_voxel.h"
+#include "core/gsm/objects.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "core/tsdf/tsdf_integrator.h"
 
@@ -36,6 +38,9 @@ struct RawSegment {
   // a segment of a saved map): sets the depth noise its surface is judged with (planarity and
   // structure, core/model/structure.h).
   float observation_depth_m = 0.0f;
+  // The GSM labels the segment is made of (core/gsm/objects.h): a whole object's parts, or just
+  // `label` when the GSM extracts labels alone (GsmParams::objects false). Sorted.
+  std::vector<Label> parts;
 };
 
 struct GsmFrameResult {
@@ -59,9 +64,8 @@ struct LabelInfo {
   absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;  // where it has votes
 };
 
-// The main label (after merges; 0 = none) of every voxel of each label block, in the block's
-// voxel order: the labels of a scene map as the store keeps them.
-using LabelBlocks = absl::flat_hash_map<tsdf::BlockIndex, std::vector<Label>, tsdf::BlockIndexHash>;
+// LabelBlocks (objects.h): the main label (after merges; 0 = none) of every voxel of each label
+// block, in the block's voxel order: the labels of a scene map as the store keeps them.
 
 // The raw segment of `label` made of `voxels` (map voxel indices): their TSDF plus `margin`
 // voxels around them, in the segment frame (see RawSegment).
@@ -69,11 +73,12 @@ RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
                              std::vector<tsdf::VoxelIndex> voxels, int margin,
                              int64_t last_update_frame, int64_t frame);
 
-// Every label of a stored map (its TSDF and main labels) with at least `min_label_voxels`
-// voxels as a raw segment, in label order, as the GSM would extract them at the end of its
-// session (used to end a session from its saved map, without its label histories).
+// Every object (params.objects) or label of a stored map (its TSDF and main labels) with at
+// least params.min_label_voxels voxels as a raw segment, in id order, as the GSM would extract
+// them at the end of its session (used to end a session from its saved map, without its label
+// histories).
 std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
-                                        int min_label_voxels, int margin, int64_t frame);
+                                        const GsmParams& params, int margin, int64_t frame);
 
 class Gsm {
  public:
@@ -91,9 +96,13 @@ class Gsm {
 
   // Raw segments of the labels not updated for extraction_age_frames frames (all labels when
   // `flush`), each extracted once until it is updated again; labels smaller than
-  // min_label_voxels are skipped.
+  // min_label_voxels are skipped. With GsmParams::objects, of the objects instead (objects.h),
+  // regrouped every object_update_frames frames: an object is extracted when all its parts are
+  // idle, and again when a part was updated or its parts changed.
   std::vector<RawSegment> extractIdle(bool flush = false);
-  // Labels extracted before whose segment no longer exists: merged into another label (whose
+  // The map's labels grouped into objects now (objects.h).
+  ObjectGroups groupObjects() const;
+  // Labels (objects) extracted before whose segment no longer exists: merged into another label (whose
   // next extraction holds their voxels), or updated and then left with fewer than
   // min_label_voxels voxels because other labels took them. Whoever keeps the extracted segments drops these (otherwise one
   // surface would be kept twice, under its old and its new label). Returned once, then cleared.
@@ -120,6 +129,12 @@ class Gsm {
   Label newLabel();
   void merge(Label keep, Label gone);
   Label mainOf(const LabelVoxel& voxel) const;
+  std::vector<RawSegment> extractIdleLabels(bool flush);
+  std::vector<RawSegment> extractIdleObjects(bool flush);
+  // The voxels whose main label is in `labels` (sorted), found through their block indices.
+  std::vector<tsdf::VoxelIndex> voxelsOf(const std::vector<Label>& labels) const;
+  // Median distance of `voxels` from the camera of frame `frame` (0: unknown frame).
+  float observationDepth(const std::vector<tsdf::VoxelIndex>& voxels, int64_t frame) const;
   struct FrameScratch;  // per-frame votes grouped by block, reused between frames
 
   TsdfParams tsdf_params_;
@@ -137,6 +152,14 @@ class Gsm {
   };
   absl::flat_hash_map<uint64_t, PairEvidence> pair_evidence_;
   std::vector<Label> withdrawn_;  // see takeWithdrawn()
+  // Objects extracted (id → its parts then, and the frame): re-extracted when those change.
+  struct ExtractedObject {
+    std::vector<Label> parts;
+    int64_t frame = -1;
+  };
+  absl::flat_hash_map<Label, ExtractedObject> extracted_objects_;
+  int64_t grouped_frame_ = -1;  // the frame objects were last regrouped at
+  std::map<Label, std::vector<Label>> groups_;  // object id → parts, as then
   Label next_label_ = 1;
   int64_t frame_ = 0;
   std::vector<Eigen::Vector3f> camera_positions_;  // world, one per integrated frame

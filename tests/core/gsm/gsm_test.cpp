@@ -164,7 +164,9 @@ TEST(Gsm, TwoSegmentsOfOneObjectGetMergedAfterAFewFrames) {
 TEST(Gsm, ALabelExtractedBeforeItMergedIsWithdrawnOnce) {
   const Intrinsics k = Intrinsics::tango();
   const World world;
-  Gsm gsm = makeGsm(k, GsmParams{});
+  GsmParams labels_alone;  // label extraction (objects_test covers the objects')
+  labels_alone.objects = false;
+  Gsm gsm = makeGsm(k, labels_alone);
   const sim::Renderer renderer(k);
   sim::RenderOutput out;
   renderer.render(world.instances(), world.camera(0.0), &out);
@@ -299,6 +301,7 @@ TEST(Gsm, IdleLabelIsExtractedExactlyOnceWithItsPoseAndVoxels) {
   const World world;
   GsmParams params;
   params.extraction_age_frames = 3;
+  params.objects = false;  // labels alone; objects_test covers the objects' extraction
   Gsm gsm = makeGsm(k, params);
   const sim::Renderer renderer(k);
   sim::RenderOutput out;
@@ -375,7 +378,7 @@ TEST(Gsm, SegmentsExtractedFromTheSavedMapAreThoseOfTheFlush) {
   const GsmParams params;
   const int margin = int(std::ceil(TsdfParams().truncation_voxels));
   const std::vector<RawSegment> from_saved =
-      extractLabelled(saved, labels, params.min_label_voxels, margin, gsm.frames());
+      extractLabelled(saved, labels, params, margin, gsm.frames());
   const std::vector<RawSegment> flushed = gsm.extractIdle(true);
   ASSERT_GE(flushed.size(), 2u) << "the floor and the box";
   ASSERT_EQ(from_saved.size(), flushed.size());
@@ -396,7 +399,9 @@ TEST(Gsm, SegmentsExtractedFromTheSavedMapAreThoseOfTheFlush) {
     }
   }
   // Labels below the minimum size are left out, as the flush leaves them.
-  EXPECT_TRUE(extractLabelled(saved, labels, 1 << 30, margin, gsm.frames()).empty());
+  GsmParams huge = params;
+  huge.min_label_voxels = 1 << 30;
+  EXPECT_TRUE(extractLabelled(saved, labels, huge, margin, gsm.frames()).empty());
 }
 
 TEST(Gsm, BadFramesAreRefusedAndLeaveTheMapUnchanged) {

@@ -1,0 +1,247 @@
+#include "core/gsm/objects.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numeric>
+
+#include <Eigen/Eigenvalues>
+
+namespace objdb::gsm {
+namespace {
+
+uint64_t packPair(Label a, Label b) {
+  return a < b ? (uint64_t(a) << 32) | b : (uint64_t(b) << 32) | a;
+}
+
+// A label's shape: voxel moments and their principal axes.
+struct Shape {
+  int64_t n = 0;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d outer = Eigen::Matrix3d::Zero();
+  // Derived.
+  Eigen::Vector3f centroid = Eigen::Vector3f::Zero();
+  Eigen::Vector3f normal = Eigen::Vector3f::UnitZ();  // thinnest axis, towards the observed side
+  Eigen::Vector3f axis[2] = {Eigen::Vector3f::UnitX(), Eigen::Vector3f::UnitY()};  // in-plane
+  float extent[2] = {0.0f, 0.0f};  // along axis[]: √12·σ (a uniform slab's width)
+  bool planar = false;
+  bool structure = false;
+};
+
+// The voxels of two touching labels next to each other (each side's own voxels).
+struct Contact {
+  int64_t pairs = 0;
+  std::vector<tsdf::VoxelIndex> side[2];  // side[0]: the smaller label's voxels, side[1]: the other's
+};
+
+class LabelLookup {
+ public:
+  LabelLookup(const LabelBlocks& labels, int vps) : labels_(labels), vps_(vps) {}
+  Label at(const tsdf::VoxelIndex& v) const {
+    const tsdf::BlockIndex b(floorDiv(v.x()), floorDiv(v.y()), floorDiv(v.z()));
+    const auto it = labels_.find(b);
+    if (it == labels_.end()) return 0;
+    const Eigen::Vector3i l = v - b * vps_;
+    return it->second[size_t(l.x() + vps_ * (l.y() + vps_ * l.z()))];
+  }
+
+ private:
+  int floorDiv(int a) const { return a >= 0 ? a / vps_ : -((-a + vps_ - 1) / vps_); }
+  const LabelBlocks& labels_;
+  int vps_;
+};
+
+// Orients `shape.normal` towards the side the TSDF is positive on (free space, where the camera
+// looked from), from the distance difference across the surface at up to 256 of its voxels.
+void orientNormal(const tsdf::TsdfLayer& layer, const std::vector<tsdf::VoxelIndex>& voxels,
+                  Shape* shape) {
+  const float step = 1.5f;  // voxels
+  double vote = 0.0;
+  const size_t stride = std::max<size_t>(1, voxels.size() / 256);
+  for (size_t i = 0; i < voxels.size(); i += stride) {
+    const Eigen::Vector3f c = voxels[i].cast<float>();
+    const auto front = layer.voxel((c + step * shape->normal).array().round().cast<int>().matrix());
+    const auto back = layer.voxel((c - step * shape->normal).array().round().cast<int>().matrix());
+    if (front == nullptr || back == nullptr || !(front->weight > 0) || !(back->weight > 0)) continue;
+    vote += double(front->distance - back->distance);
+  }
+  if (vote < 0.0) shape->normal = -shape->normal;
+}
+
+void deriveShape(float voxel, float structure_extent_m, Shape* s) {
+  const double n = double(s->n);
+  const Eigen::Vector3d mean = s->sum / n;
+  const Eigen::Matrix3d cov = s->outer / n - mean * mean.transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);  // ascending eigenvalues
+  const Eigen::Vector3d sigma = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt() * double(voxel);
+  s->centroid = mean.cast<float>();  // voxel units
+  s->normal = eig.eigenvectors().col(0).cast<float>();
+  s->axis[0] = eig.eigenvectors().col(2).cast<float>();
+  s->axis[1] = eig.eigenvectors().col(1).cast<float>();
+  s->extent[0] = float(std::sqrt(12.0) * sigma(2));
+  s->extent[1] = float(std::sqrt(12.0) * sigma(1));
+  s->planar = s->n >= 20 && sigma(0) <= std::max(double(voxel), 0.1 * sigma(1));
+  s->structure = s->planar && s->extent[1] >= structure_extent_m;
+}
+
+// Whether `upper` rests on planar `support` at their contact (`contact` = the support's voxels
+// next to `upper`): `upper` lies on the support's observed side, and the support's surface
+// continues beyond the contact along ±both in-plane axes within `probe` voxels, or along three of
+// them when the contact is a small footprint on it (at most half its extent along both axes: the
+// fourth side may lie in the object's shadow, never seen from where the camera went).
+bool restsOn(const Shape& upper, const Shape& support, const std::vector<tsdf::VoxelIndex>& contact,
+             Label support_label, const LabelLookup& lookup, float probe, float voxel) {
+  if (!support.planar || contact.empty()) return false;
+  Eigen::Vector3f c = Eigen::Vector3f::Zero();
+  for (const auto& v : contact) c += v.cast<float>();
+  c /= float(contact.size());
+  if ((upper.centroid - c).dot(support.normal) <= 0.0f) return false;  // behind it: attached
+  int sides = 0;
+  bool small = true;
+  for (int axis = 0; axis < 2; ++axis) {
+    float lo = 0.0f, hi = 0.0f;  // the contact's own extent along the axis
+    for (const auto& v : contact) {
+      const float x = (v.cast<float>() - c).dot(support.axis[axis]);
+      lo = std::min(lo, x);
+      hi = std::max(hi, x);
+    }
+    small = small && (hi - lo + 1.0f) * voxel <= 0.5f * support.extent[axis];
+    for (const float sign : {1.0f, -1.0f}) {
+      const Eigen::Vector3f dir = sign * support.axis[axis];
+      const float reach = sign > 0 ? hi : -lo;
+      bool found = false;
+      for (float s = reach + 1.0f; s <= reach + probe && !found; s += 1.0f) {
+        const Eigen::Vector3f q = c + s * dir;
+        for (const float t : {0.0f, 1.0f, -1.0f, 2.0f, -2.0f}) {
+          const tsdf::VoxelIndex v = (q + t * support.normal).array().round().cast<int>().matrix();
+          if (lookup.at(v) == support_label) {
+            found = true;
+            break;
+          }
+        }
+      }
+      sides += found ? 1 : 0;
+    }
+  }
+  return sides == 4 || (sides == 3 && small);
+}
+
+Label findRoot(absl::flat_hash_map<Label, Label>* parent, Label l) {
+  Label root = l;
+  while ((*parent)[root] != root) root = (*parent)[root];
+  while ((*parent)[l] != root) {
+    const Label next = (*parent)[l];
+    (*parent)[l] = root;
+    l = next;
+  }
+  return root;
+}
+
+}  // namespace
+
+ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
+                          const GsmParams& params) {
+  const int vps = layer.voxelsPerSide();
+  const float voxel = layer.voxelSize();
+  const int r = std::clamp(1 + int(std::floor(params.object_gap_m / voxel + 1e-3f)), 1, vps);
+  // Forward half of the ball of radius r: each touching voxel pair is seen once.
+  std::vector<Eigen::Vector3i> offsets;
+  for (int z = 0; z <= r; ++z) {
+    for (int y = -r; y <= r; ++y) {
+      for (int x = -r; x <= r; ++x) {
+        const bool forward = z > 0 || (z == 0 && (y > 0 || (y == 0 && x > 0)));
+        if (forward && x * x + y * y + z * z <= r * r) offsets.emplace_back(x, y, z);
+      }
+    }
+  }
+  absl::flat_hash_map<Label, Shape> shapes;
+  absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>> voxels_of;
+  absl::flat_hash_map<uint64_t, Contact> contacts;
+  for (const auto& [index, block] : labels) {
+    // The 27 blocks around this one, so neighbours cost an array read, not a hash lookup.
+    std::array<const std::vector<Label>*, 27> around{};
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = labels.find(index + Eigen::Vector3i(dx, dy, dz));
+          around[size_t((dx + 1) + 3 * ((dy + 1) + 3 * (dz + 1)))] =
+              it == labels.end() ? nullptr : &it->second;
+        }
+      }
+    }
+    for (int i = 0; i < int(block.size()); ++i) {
+      const Label l = block[size_t(i)];
+      if (l == 0) continue;
+      const Eigen::Vector3i local(i % vps, (i / vps) % vps, i / (vps * vps));
+      const tsdf::VoxelIndex v = index * vps + local;
+      Shape& s = shapes[l];
+      const Eigen::Vector3d p = v.cast<double>();
+      ++s.n;
+      s.sum += p;
+      s.outer += p * p.transpose();
+      voxels_of[l].push_back(v);
+      for (const Eigen::Vector3i& o : offsets) {
+        const Eigen::Vector3i q = local + o;
+        const Eigen::Vector3i nb((q.x() + vps) / vps - 1, (q.y() + vps) / vps - 1,
+                                 (q.z() + vps) / vps - 1);
+        const std::vector<Label>* other = around[size_t((nb.x() + 1) + 3 * ((nb.y() + 1) + 3 * (nb.z() + 1)))];
+        if (other == nullptr) continue;
+        const Eigen::Vector3i ql = q - nb * vps;
+        const Label m = (*other)[size_t(ql.x() + vps * (ql.y() + vps * ql.z()))];
+        if (m == 0 || m == l) continue;
+        Contact& c = contacts[packPair(l, m)];
+        ++c.pairs;
+        c.side[l < m ? 0 : 1].push_back(v);
+        c.side[l < m ? 1 : 0].push_back(index * vps + q);
+      }
+    }
+  }
+  ObjectGroups out;
+  absl::flat_hash_map<Label, Label> parent;
+  for (auto& [l, s] : shapes) {
+    parent[l] = l;
+    deriveShape(voxel, params.object_structure_extent_m, &s);
+    if (s.planar) orientNormal(layer, voxels_of[l], &s);
+    if (s.structure) out.structure.insert(l);
+  }
+  const LabelLookup lookup(labels, vps);
+  const float probe = params.object_support_probe_m / voxel;
+  // In label order, so the grouping does not depend on hash order.
+  std::vector<uint64_t> keys;
+  for (const auto& [key, c] : contacts) keys.push_back(key);
+  std::sort(keys.begin(), keys.end());
+  for (const uint64_t key : keys) {
+    Contact& c = contacts[key];
+    const Label a = Label(key >> 32), b = Label(key & 0xffffffffULL);
+    ++out.contacts;
+    if (c.pairs < params.object_min_contact_voxels) continue;
+    const Shape& sa = shapes[a];
+    const Shape& sb = shapes[b];
+    if (sa.structure || sb.structure) continue;
+    for (auto& side : c.side) {
+      std::sort(side.begin(), side.end(), [](const auto& x, const auto& y) {
+        return std::tie(x.z(), x.y(), x.x()) < std::tie(y.z(), y.y(), y.x());
+      });
+      side.erase(std::unique(side.begin(), side.end()), side.end());
+    }
+    if (restsOn(sa, sb, c.side[1], b, lookup, probe, voxel) ||
+        restsOn(sb, sa, c.side[0], a, lookup, probe, voxel)) {
+      ++out.supports;
+      continue;
+    }
+    const Label ra = findRoot(&parent, a), rb = findRoot(&parent, b);
+    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+  }
+  for (const auto& [l, s] : shapes) {
+    Label root = findRoot(&parent, l);
+    out.members[root].push_back(l);
+  }
+  // The id is the smallest label (the roots already are: unions keep the smaller root).
+  for (auto& [id, members] : out.members) {
+    std::sort(members.begin(), members.end());
+    for (const Label l : members) out.object_of[l] = id;
+  }
+  return out;
+}
+
+}  // namespace objdb::gsm

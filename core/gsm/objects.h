@@ -1,0 +1,47 @@
+// Object hypotheses above the GSM's convex labels (ours, issue 18). The segmenter cuts frames
+// into convex parts (paper §III-A), so a chair is a seat, a back and legs. Here the labels of a
+// map are grouped into objects: two labels connect when their voxels touch (within
+// GsmParams::object_gap_m, at least object_min_contact_voxels pairs), unless
+//   - either is room structure: planar (its thinnest principal axis under a tenth of its middle
+//     one, or one voxel) and at least object_structure_extent_m along both in-plane axes (a
+//     floor, a wall); structure labels stay objects of their own;
+//   - one rests on the other: the other is planar, the first lies on its observed side (the
+//     side the TSDF is positive on), and the other's surface continues beyond the contact in all
+//     four in-plane directions within object_support_probe_m, or in three when the contact is a
+//     small footprint on it (at most half its extent along both axes; the fourth side may be in
+//     the object's shadow): a mug on a table top, a box on a shelf or on a piece of floor, a
+//     picture on a door. A back standing along a seat's rear edge, or legs under it, do not
+//     rest on it: they stay parts of the chair.
+// An object is a connected component of the rest; its id is its smallest label, so it is stable
+// while labels merge (the older label survives) and parts join it. The grouping is a function
+// of the map's main labels (the per-voxel label-count history decides them), recomputed from
+// them: merges and splits of objects lose nothing, the parts keep their labels.
+#pragma once
+
+#include <map>
+#include <vector>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/container/flat_hash_set.h"
+#include "core/common/params.h"
+#include "core/gsm/label_voxel.h"
+#include "core/tsdf/tsdf_layer.h"
+
+namespace objdb::gsm {
+
+using LabelBlocks = absl::flat_hash_map<tsdf::BlockIndex, std::vector<Label>, tsdf::BlockIndexHash>;
+
+struct ObjectGroups {
+  std::map<Label, std::vector<Label>> members;   // object id (its smallest label) → labels, sorted
+  absl::flat_hash_map<Label, Label> object_of;   // label → object id
+  absl::flat_hash_set<Label> structure;          // labels that are room structure
+  size_t contacts = 0;  // label pairs that touch
+  size_t supports = 0;  // of them, not connected because one rests on the other
+};
+
+// Groups the labels of `labels` (main label per voxel of each block, 0 = none; `layer` gives the
+// TSDF for the observed side of a surface). Every label present is in exactly one object.
+ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
+                          const GsmParams& params);
+
+}  // namespace objdb::gsm
