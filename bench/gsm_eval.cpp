@@ -160,85 +160,113 @@ int main(int argc, char** argv) {
     }
     const double pipeline_hz = 1000.0 * double(input.size()) / msSince(pipe_start);
 
-    // Per object: voxels, and how many of them each GSM label holds.
-    std::map<uint16_t, size_t> object_voxels;
-    std::map<uint16_t, std::map<gsm::Label, size_t>> by_label;
-    std::map<gsm::Label, std::map<uint16_t, size_t>> label_objects;
-    for (const auto& [key, voxel_truth] : truth) {
-      const uint16_t id = uint16_t(voxel_truth.mainLabel());
-      const tsdf::VoxelIndex x = unpackGridKey(key);
-      const gsm::Label l = map.mainLabel(x);
-      ++object_voxels[id];
-      if (l != 0) {
-        ++by_label[id][l];
-        ++label_objects[l][id];
-      }
-    }
-    // Each label's majority object: the labels "mostly inside" an object, whose union credits an
-    // object the segmenter cut into parts.
-    std::map<gsm::Label, uint16_t> majority_of;
-    for (const auto& [l, objects_in] : label_objects) {
-      size_t most = 0;
-      for (const auto& [id, c] : objects_in) {
-        if (c > most) {
-          most = c;
-          majority_of[l] = id;
+    // Label quality, of the GSM's labels (parts) and of its objects (core/gsm/objects.h: each
+    // label counted as the object it belongs to).
+    struct Quality {
+      double sum = 0, worst = 1, union_sum = 0, union_worst = 1;
+      int objects = 0;
+      size_t spanning = 0, units = 0;
+      std::string per_object;
+    };
+    const gsm::ObjectGroups groups = map.groupObjects();
+    const auto score = [&](bool as_objects) {
+      const auto unit = [&](gsm::Label l) {
+        if (!as_objects) return l;
+        const auto it = groups.object_of.find(l);
+        return it == groups.object_of.end() ? l : it->second;
+      };
+      // Per object: voxels, and how many of them each unit (label or object) holds.
+      std::map<uint16_t, size_t> object_voxels;
+      std::map<uint16_t, std::map<gsm::Label, size_t>> by_label;
+      std::map<gsm::Label, std::map<uint16_t, size_t>> label_objects;
+      for (const auto& [key, voxel_truth] : truth) {
+        const uint16_t id = uint16_t(voxel_truth.mainLabel());
+        const tsdf::VoxelIndex x = unpackGridKey(key);
+        const gsm::Label l = map.mainLabel(x);
+        ++object_voxels[id];
+        if (l != 0) {
+          ++by_label[id][unit(l)];
+          ++label_objects[unit(l)][id];
         }
       }
-    }
-    double worst = 1.0, sum = 0.0, union_worst = 1.0, union_sum = 0.0;
-    int objects = 0;
-    std::string per_object;
-    for (const auto& [id, n] : object_voxels) {
-      if (structure.count(id)) continue;
-      size_t best = 0, parts = 0, labelled = 0, in_union = 0;
-      for (const auto& [l, c] : by_label[id]) {
-        best = std::max(best, c);
-        parts += c * 10 > n ? 1 : 0;
-        labelled += c;
-        in_union += majority_of[l] == id ? c : 0;
-      }
-      const double share = double(best) / double(n);
-      const double union_share = double(in_union) / double(n);
-      union_worst = std::min(union_worst, union_share);
-      union_sum += union_share;
-      std::string kind;
-      for (const auto& o : scene.objects) {
-        if (uint16_t(o.id) == id) kind = o.category;
-      }
-      per_object += absl::StrFormat(
-          "%s%d %s %.2f, union %.2f (%zu labels > 10 %%, %.0f %% unlabelled)",
-          per_object.empty() ? "" : "; ", id, kind, share, union_share, parts,
-          100.0 * (1.0 - double(labelled) / double(n)));
-      worst = std::min(worst, share);
-      sum += share;
-      ++objects;
-    }
-    size_t spanning = 0, labels = 0;
-    for (const auto& [l, objects_in] : label_objects) {
-      size_t total = 0, above = 0;
-      for (const auto& [id, c] : objects_in) total += c;
-      for (const auto& [id, c] : objects_in) above += c > total / 10 ? 1 : 0;
-      // Only labels the database would get: smaller ones are never extracted.
-      if (total < size_t(gsm_params.min_label_voxels)) continue;
-      ++labels;
-      spanning += above >= 2 ? 1 : 0;
-      if (verbose && above >= 2) {
-        std::string parts;
+      // Each unit's majority object: the units "mostly inside" an object, whose union credits
+      // an object the segmenter cut into parts.
+      std::map<gsm::Label, uint16_t> majority_of;
+      for (const auto& [l, objects_in] : label_objects) {
+        size_t most = 0;
         for (const auto& [id, c] : objects_in) {
-          if (c > total / 10) parts += absl::StrFormat(" %d:%zu", id, c);
+          if (c > most) {
+            most = c;
+            majority_of[l] = id;
+          }
         }
-        std::printf("%-10s label %u spans objects (id:voxels)%s of %zu voxels\n", "", l,
-                    parts.c_str(), total);
       }
-    }
+      Quality q;
+      for (const auto& [id, n] : object_voxels) {
+        if (structure.count(id)) continue;
+        size_t best = 0, parts = 0, labelled = 0, in_union = 0;
+        for (const auto& [l, c] : by_label[id]) {
+          best = std::max(best, c);
+          parts += c * 10 > n ? 1 : 0;
+          labelled += c;
+          in_union += majority_of[l] == id ? c : 0;
+        }
+        const double share = double(best) / double(n);
+        const double union_share = double(in_union) / double(n);
+        q.union_worst = std::min(q.union_worst, union_share);
+        q.union_sum += union_share;
+        std::string kind;
+        for (const auto& o : scene.objects) {
+          if (uint16_t(o.id) == id) kind = o.category;
+        }
+        q.per_object += absl::StrFormat(
+            "%s%d %s %.2f, union %.2f (%zu %s > 10 %%, %.0f %% unlabelled)",
+            q.per_object.empty() ? "" : "; ", id, kind, share, union_share, parts,
+            as_objects ? "objects" : "labels", 100.0 * (1.0 - double(labelled) / double(n)));
+        q.worst = std::min(q.worst, share);
+        q.sum += share;
+        ++q.objects;
+      }
+      for (const auto& [l, objects_in] : label_objects) {
+        size_t total = 0, above = 0;
+        for (const auto& [id, c] : objects_in) total += c;
+        for (const auto& [id, c] : objects_in) above += c > total / 10 ? 1 : 0;
+        // Only units the database would get: smaller ones are never extracted.
+        if (total < size_t(gsm_params.min_label_voxels)) continue;
+        ++q.units;
+        q.spanning += above >= 2 ? 1 : 0;
+        if (verbose && above >= 2) {
+          std::string parts;
+          for (const auto& [id, c] : objects_in) {
+            if (c > total / 10) parts += absl::StrFormat(" %d:%zu", id, c);
+          }
+          std::printf("%-10s %s %u spans objects (id:voxels)%s of %zu voxels\n", "",
+                      as_objects ? "object" : "label", l, parts.c_str(), total);
+        }
+      }
+      return q;
+    };
+    const Quality parts = score(false);
+    const Quality whole = score(true);
+    const auto mean = [](double sum, int n) { return n ? sum / n : 0.0; };
     std::printf("%-10s %-7s %8.2f %8.2f %8.2f %8.1f %7zu %8zu %5.2f/%4.2f  %5.2f/%4.2f %6zu/%zu\n",
                 scene.name.c_str(), history ? "history" : "single", seg_ms / double(frames),
                 gsm_ms / double(frames), (seg_ms + gsm_ms) / double(frames),
                 1000.0 * double(frames) / (seg_ms + gsm_ms), map.numLabels(), merges,
-                objects ? sum / objects : 0.0, worst, objects ? union_sum / objects : 0.0,
-                union_worst, spanning, labels);
-    if (verbose) std::printf("%-10s per object: %s\n", "", per_object.c_str());
+                mean(parts.sum, parts.objects), parts.worst, mean(parts.union_sum, parts.objects),
+                parts.union_worst, parts.spanning, parts.units);
+    const auto group_start = std::chrono::steady_clock::now();
+    (void)map.groupObjects();
+    const double group_ms = msSince(group_start);
+    std::printf("%-10s %-7s %45s %5.2f/%4.2f  %5.2f/%4.2f %6zu/%zu   (%zu objects, grouped in "
+                "%.1f ms)\n",
+                "", "objects", "", mean(whole.sum, whole.objects), whole.worst,
+                mean(whole.union_sum, whole.objects), whole.union_worst, whole.spanning,
+                whole.units, groups.members.size(), group_ms);
+    if (verbose) {
+      std::printf("%-10s per object, labels: %s\n", "", parts.per_object.c_str());
+      std::printf("%-10s per object, objects: %s\n", "", whole.per_object.c_str());
+    }
     std::printf("%-10s pipelined on 2 threads (segment k+1 while fusing k): %.1f Hz\n", "",
                 pipeline_hz);
     if (history) {
@@ -266,6 +294,8 @@ int main(int argc, char** argv) {
               "label's share of the object's voxels; union cov.: the same for the labels whose "
               "majority is the object, together; span 2 obj.: labels with >= 2 objects above "
               "10 %% of their voxels / labels with at least min_label_voxels voxels (the ones "
-              "extraction hands to the database). One thread.\n");
+              "extraction hands to the database). objects: the same for the GSM's objects "
+              "(core/gsm/objects.h: each label counted as the object it belongs to). One "
+              "thread.\n");
   return 0;
 }

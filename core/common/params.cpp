@@ -71,6 +71,8 @@ Status GsmParams::validate() const {
   OBJDB_RETURN_IF_ERROR(
       inRange(object_structure_extent_m, 0.05, 100.0, "gsm.object_structure_extent_m"));
   OBJDB_RETURN_IF_ERROR(inRange(object_support_probe_m, 0.0, 5.0, "gsm.object_support_probe_m"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(object_support_max_ratio, 0.0, 10.0, "gsm.object_support_max_ratio"));
   return inRange(object_update_frames, 1, 1 << 20, "gsm.object_update_frames");
 }
 

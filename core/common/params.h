@@ -77,10 +77,13 @@ struct GsmParams {
   // object_update_frames frames (and at a flush); extraction runs then.
   bool objects = true;
   float object_gap_m = 0.02f;
-  int object_min_contact_voxels = 3;  // touching voxel pairs for two labels to connect
+  int object_min_contact_voxels = 3;  // voxels of two labels next to the other, to connect
   float object_structure_extent_m = 1.0f;
   float object_support_probe_m = 0.3f;
-  int object_update_frames = 5;
+  // ... and only when the object resting there spans at most this share of the support's extent
+  // along both of its axes (a pedestal carrying a seat as wide as its base is not a mug).
+  float object_support_max_ratio = 0.7f;
+  int object_update_frames = 10;
   Status validate() const;
 };
 

@@ -51,6 +51,7 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("object_min_contact_voxels", p.object_min_contact_voxels);
   fn("object_structure_extent_m", p.object_structure_extent_m);
   fn("object_support_probe_m", p.object_support_probe_m);
+  fn("object_support_max_ratio", p.object_support_max_ratio);
   fn("object_update_frames", p.object_update_frames);
 }
 template <typename Fn>

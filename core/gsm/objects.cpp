@@ -29,9 +29,11 @@ struct Shape {
 };
 
 // The voxels of two touching labels next to each other (each side's own voxels).
+// Two touching labels: the voxels of each next to the other (side[0]: the smaller label's), and
+// how many there are on both sides together.
 struct Contact {
   int64_t pairs = 0;
-  std::vector<tsdf::VoxelIndex> side[2];  // side[0]: the smaller label's voxels, side[1]: the other's
+  std::vector<tsdf::VoxelIndex> side[2];
 };
 
 class LabelLookup {
@@ -80,7 +82,7 @@ void deriveShape(float voxel, float structure_extent_m, Shape* s) {
   s->axis[1] = eig.eigenvectors().col(1).cast<float>();
   s->extent[0] = float(std::sqrt(12.0) * sigma(2));
   s->extent[1] = float(std::sqrt(12.0) * sigma(1));
-  s->planar = s->n >= 20 && sigma(0) <= std::max(double(voxel), 0.1 * sigma(1));
+  s->planar = s->n >= 20 && sigma(0) <= std::max(1.5 * double(voxel), 0.1 * sigma(1));
   s->structure = s->planar && s->extent[1] >= structure_extent_m;
 }
 
@@ -89,12 +91,38 @@ void deriveShape(float voxel, float structure_extent_m, Shape* s) {
 // continues beyond the contact along ±both in-plane axes within `probe` voxels, or along three of
 // them when the contact is a small footprint on it (at most half its extent along both axes: the
 // fourth side may lie in the object's shadow, never seen from where the camera went).
-bool restsOn(const Shape& upper, const Shape& support, const std::vector<tsdf::VoxelIndex>& contact,
-             Label support_label, const LabelLookup& lookup, float probe, float voxel) {
-  if (!support.planar || contact.empty()) return false;
+bool restsOn(const Shape& upper, const Shape& support_shape,
+             const std::vector<tsdf::VoxelIndex>& support_voxels,
+             const std::vector<tsdf::VoxelIndex>& contact, Label support_label,
+             const LabelLookup& lookup, const tsdf::TsdfLayer& layer, float probe, float voxel) {
+  if (contact.empty()) return false;
   Eigen::Vector3f c = Eigen::Vector3f::Zero();
   for (const auto& v : contact) c += v.cast<float>();
   c /= float(contact.size());
+  // The support's plane: the whole label's when it is planar, else the label's surface around
+  // the contact, 5 voxels beyond it (a table top with its apron and legs under one label is flat
+  // where a mug stands).
+  Shape local;
+  if (!support_shape.planar) {
+    float radius = 0.0f;
+    for (const auto& v : contact) radius = std::max(radius, (v.cast<float>() - c).norm());
+    radius += 5.0f;  // voxels: the surface just around the contact
+    std::vector<tsdf::VoxelIndex> near;
+    for (const auto& v : support_voxels) {
+      if ((v.cast<float>() - c).squaredNorm() <= radius * radius) near.push_back(v);
+    }
+    for (const auto& v : near) {
+      const Eigen::Vector3d p = v.cast<double>();
+      ++local.n;
+      local.sum += p;
+      local.outer += p * p.transpose();
+    }
+    if (local.n < 20) return false;
+    deriveShape(voxel, 1e9f, &local);
+    if (!local.planar) return false;
+    orientNormal(layer, near, &local);
+  }
+  const Shape& support = support_shape.planar ? support_shape : local;
   if ((upper.centroid - c).dot(support.normal) <= 0.0f) return false;  // behind it: attached
   int sides = 0;
   bool small = true;
@@ -144,20 +172,61 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
   const int vps = layer.voxelsPerSide();
   const float voxel = layer.voxelSize();
   const int r = std::clamp(1 + int(std::floor(params.object_gap_m / voxel + 1e-3f)), 1, vps);
-  // Forward half of the ball of radius r: each touching voxel pair is seen once.
+  // The ball of radius r (without its centre): the voxels that touch a voxel.
   std::vector<Eigen::Vector3i> offsets;
-  for (int z = 0; z <= r; ++z) {
+  for (int z = -r; z <= r; ++z) {
     for (int y = -r; y <= r; ++y) {
       for (int x = -r; x <= r; ++x) {
-        const bool forward = z > 0 || (z == 0 && (y > 0 || (y == 0 && x > 0)));
-        if (forward && x * x + y * y + z * z <= r * r) offsets.emplace_back(x, y, z);
+        const int d2 = x * x + y * y + z * z;
+        if (d2 > 0 && d2 <= r * r) offsets.emplace_back(x, y, z);
       }
     }
   }
+  // Blocks in index order: the result must not depend on hash order.
+  std::vector<const LabelBlocks::value_type*> blocks;
+  blocks.reserve(labels.size());
+  for (const auto& entry : labels) blocks.push_back(&entry);
+  std::sort(blocks.begin(), blocks.end(), [](const auto* a, const auto* b) {
+    return std::tie(a->first.z(), a->first.y(), a->first.x()) <
+           std::tie(b->first.z(), b->first.y(), b->first.x());
+  });
+  // Pass 1: every label's voxels and shape.
   absl::flat_hash_map<Label, Shape> shapes;
   absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>> voxels_of;
+  for (const auto* entry : blocks) {
+    const auto& [index, block] = *entry;
+    Label last = 0;
+    Shape* s = nullptr;
+    std::vector<tsdf::VoxelIndex>* list = nullptr;
+    for (int i = 0; i < int(block.size()); ++i) {
+      const Label l = block[size_t(i)];
+      if (l == 0) continue;
+      if (l != last) {
+        last = l;
+        s = &shapes[l];
+        list = &voxels_of[l];
+      }
+      const tsdf::VoxelIndex v = index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps));
+      const Eigen::Vector3d p = v.cast<double>();
+      ++s->n;
+      s->sum += p;
+      s->outer += p * p.transpose();
+      list->push_back(v);
+    }
+  }
+  ObjectGroups out;
+  absl::flat_hash_map<Label, Label> parent;
+  for (auto& [l, s] : shapes) {
+    parent[l] = l;
+    deriveShape(voxel, params.object_structure_extent_m, &s);
+    if (s.planar) orientNormal(layer, voxels_of[l], &s);
+    if (s.structure) out.structure.insert(l);
+  }
+  // Pass 2: contacts between labels that are not structure (structure never connects), each
+  // side's voxels next to the other label listed once.
   absl::flat_hash_map<uint64_t, Contact> contacts;
-  for (const auto& [index, block] : labels) {
+  for (const auto* entry : blocks) {
+    const auto& [index, block] = *entry;
     // The 27 blocks around this one, so neighbours cost an array read, not a hash lookup.
     std::array<const std::vector<Label>*, 27> around{};
     for (int dz = -1; dz <= 1; ++dz) {
@@ -171,38 +240,34 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     }
     for (int i = 0; i < int(block.size()); ++i) {
       const Label l = block[size_t(i)];
-      if (l == 0) continue;
+      if (l == 0 || out.structure.contains(l)) continue;
       const Eigen::Vector3i local(i % vps, (i / vps) % vps, i / (vps * vps));
-      const tsdf::VoxelIndex v = index * vps + local;
-      Shape& s = shapes[l];
-      const Eigen::Vector3d p = v.cast<double>();
-      ++s.n;
-      s.sum += p;
-      s.outer += p * p.transpose();
-      voxels_of[l].push_back(v);
+      std::array<Label, 8> near{};
+      size_t n_near = 0;
       for (const Eigen::Vector3i& o : offsets) {
         const Eigen::Vector3i q = local + o;
         const Eigen::Vector3i nb((q.x() + vps) / vps - 1, (q.y() + vps) / vps - 1,
                                  (q.z() + vps) / vps - 1);
-        const std::vector<Label>* other = around[size_t((nb.x() + 1) + 3 * ((nb.y() + 1) + 3 * (nb.z() + 1)))];
+        const std::vector<Label>* other =
+            around[size_t((nb.x() + 1) + 3 * ((nb.y() + 1) + 3 * (nb.z() + 1)))];
         if (other == nullptr) continue;
         const Eigen::Vector3i ql = q - nb * vps;
         const Label m = (*other)[size_t(ql.x() + vps * (ql.y() + vps * ql.z()))];
-        if (m == 0 || m == l) continue;
+        if (m == 0 || m == l || std::find(near.begin(), near.begin() + long(n_near), m) !=
+                                    near.begin() + long(n_near)) {
+          continue;
+        }
+        if (n_near < near.size()) near[n_near++] = m;
+      }
+      const tsdf::VoxelIndex v = index * vps + local;
+      for (size_t k = 0; k < n_near; ++k) {
+        const Label m = near[k];
+        if (out.structure.contains(m)) continue;
         Contact& c = contacts[packPair(l, m)];
         ++c.pairs;
         c.side[l < m ? 0 : 1].push_back(v);
-        c.side[l < m ? 1 : 0].push_back(index * vps + q);
       }
     }
-  }
-  ObjectGroups out;
-  absl::flat_hash_map<Label, Label> parent;
-  for (auto& [l, s] : shapes) {
-    parent[l] = l;
-    deriveShape(voxel, params.object_structure_extent_m, &s);
-    if (s.planar) orientNormal(layer, voxels_of[l], &s);
-    if (s.structure) out.structure.insert(l);
   }
   const LabelLookup lookup(labels, vps);
   const float probe = params.object_support_probe_m / voxel;
@@ -210,27 +275,68 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
   std::vector<uint64_t> keys;
   for (const auto& [key, c] : contacts) keys.push_back(key);
   std::sort(keys.begin(), keys.end());
+  const auto unite = [&](Label a, Label b) {
+    const Label ra = findRoot(&parent, a), rb = findRoot(&parent, b);
+    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+  };
+  std::vector<std::pair<Label, Label>> supported;  // (resting, support), to be decided below
   for (const uint64_t key : keys) {
     Contact& c = contacts[key];
     const Label a = Label(key >> 32), b = Label(key & 0xffffffffULL);
     ++out.contacts;
-    if (c.pairs < params.object_min_contact_voxels) continue;
     const Shape& sa = shapes[a];
     const Shape& sb = shapes[b];
+    if (c.pairs < params.object_min_contact_voxels) continue;
     if (sa.structure || sb.structure) continue;
-    for (auto& side : c.side) {
-      std::sort(side.begin(), side.end(), [](const auto& x, const auto& y) {
-        return std::tie(x.z(), x.y(), x.x()) < std::tie(y.z(), y.y(), y.x());
-      });
-      side.erase(std::unique(side.begin(), side.end()), side.end());
+    if (restsOn(sa, sb, voxels_of[b], c.side[1], b, lookup, layer, probe, voxel)) {
+      supported.push_back({a, b});
+      continue;
     }
-    if (restsOn(sa, sb, c.side[1], b, lookup, probe, voxel) ||
-        restsOn(sb, sa, c.side[0], a, lookup, probe, voxel)) {
+    if (restsOn(sb, sa, voxels_of[a], c.side[0], a, lookup, layer, probe, voxel)) {
+      supported.push_back({b, a});
+      continue;
+    }
+    unite(a, b);
+  }
+  // A cut holds only where what rests is smaller than its support: the object above it, as
+  // grouped without the cut, spans at most object_support_max_ratio of the support's extent
+  // along both of its axes (a mug, a box, a monitor on a table). A pedestal on its base carries
+  // a seat or a table top as wide as the base, and stays part of that object.
+  absl::flat_hash_map<Label, std::vector<Label>> component;
+  for (const auto& [l, s] : shapes) component[findRoot(&parent, l)].push_back(l);
+  for (const auto& [upper, support] : supported) {
+    const Label ru = findRoot(&parent, upper), rs = findRoot(&parent, support);
+    if (ru == rs) continue;
+    const Shape& sb = shapes[support];
+    float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
+    for (const Label l : component[ru]) {
+      for (const auto& v : voxels_of[l]) {
+        for (int axis = 0; axis < 2; ++axis) {
+          const float x = v.cast<float>().dot(sb.axis[axis]);
+          lo[axis] = std::min(lo[axis], x);
+          hi[axis] = std::max(hi[axis], x);
+        }
+      }
+    }
+    bool smaller = true;
+    for (int axis = 0; axis < 2; ++axis) {
+      smaller = smaller && (hi[axis] - lo[axis] + 1.0f) * voxel <=
+                               params.object_support_max_ratio * sb.extent[axis];
+    }
+    if (smaller) {
       ++out.supports;
       continue;
     }
-    const Label ra = findRoot(&parent, a), rb = findRoot(&parent, b);
-    if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
+    std::vector<Label> moved = std::move(component[ru]);
+    std::vector<Label>& into = component[rs];
+    into.insert(into.end(), moved.begin(), moved.end());
+    component.erase(ru);
+    unite(upper, support);
+    const Label root = findRoot(&parent, upper);
+    if (root != rs) {  // the component is listed under its new root
+      component[root] = std::move(component[rs]);
+      component.erase(rs);
+    }
   }
   for (const auto& [l, s] : shapes) {
     Label root = findRoot(&parent, l);

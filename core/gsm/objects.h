@@ -1,17 +1,22 @@
 // Object hypotheses above the GSM's convex labels (ours, issue 18). The segmenter cuts frames
 // into convex parts (paper §III-A), so a chair is a seat, a back and legs. Here the labels of a
 // map are grouped into objects: two labels connect when their voxels touch (within
-// GsmParams::object_gap_m, at least object_min_contact_voxels pairs), unless
-//   - either is room structure: planar (its thinnest principal axis under a tenth of its middle
-//     one, or one voxel) and at least object_structure_extent_m along both in-plane axes (a
-//     floor, a wall); structure labels stay objects of their own;
-//   - one rests on the other: the other is planar, the first lies on its observed side (the
-//     side the TSDF is positive on), and the other's surface continues beyond the contact in all
-//     four in-plane directions within object_support_probe_m, or in three when the contact is a
-//     small footprint on it (at most half its extent along both axes; the fourth side may be in
-//     the object's shadow): a mug on a table top, a box on a shelf or on a piece of floor, a
-//     picture on a door. A back standing along a seat's rear edge, or legs under it, do not
-//     rest on it: they stay parts of the chair.
+// GsmParams::object_gap_m, at least object_min_contact_voxels voxels of the two next to the
+// other), unless
+//   - either is room structure: planar (the standard deviation along its thinnest principal axis
+//     at most a tenth of that along its middle one, or 1.5 voxels: a TSDF surface is two voxels
+//     thick) and at least object_structure_extent_m (√12 σ) along both in-plane axes (a floor, a
+//     wall); structure labels stay objects of their own;
+//   - one rests on the other: the other is planar there (the whole label, or its surface within
+//     5 voxels of the contact: a table top under one label with its apron is flat where a mug
+//     stands), the first lies on its observed side (where the TSDF is positive), and the other's
+//     surface continues beyond the contact in all four in-plane directions within
+//     object_support_probe_m, or in three when the contact is a small footprint on it (at most
+//     half its extent along both axes; the fourth side may lie in the object's shadow), and what
+//     rests there, grouped without this cut, spans at most object_support_max_ratio of the
+//     support's extent along both its axes: a mug on a table top, a box on a shelf or on a piece
+//     of floor, a picture on a door. A back standing along a seat's rear edge, legs under it, or
+//     a pedestal carrying a seat as wide as its base do not rest: they stay parts of the chair.
 // An object is a connected component of the rest; its id is its smallest label, so it is stable
 // while labels merge (the older label survives) and parts join it. The grouping is a function
 // of the map's main labels (the per-voxel label-count history decides them), recomputed from
@@ -35,7 +40,7 @@ struct ObjectGroups {
   std::map<Label, std::vector<Label>> members;   // object id (its smallest label) → labels, sorted
   absl::flat_hash_map<Label, Label> object_of;   // label → object id
   absl::flat_hash_set<Label> structure;          // labels that are room structure
-  size_t contacts = 0;  // label pairs that touch
+  size_t contacts = 0;  // label pairs that touch (neither structure)
   size_t supports = 0;  // of them, not connected because one rests on the other
 };
 
