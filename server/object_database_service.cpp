@@ -486,6 +486,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
   e.set_reason(job.reason);
   e.set_last_frame_index(job.last_frame_index);
   e.set_num_voxels(uint32_t(segment.label_voxels.size()));
+  for (const gsm::Label part : segment.parts) e.add_parts(part);
   *e.mutable_t_world_segment() = toProto(segment.T_world_segment);
   if (!segment.label_voxels.empty()) {
     Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::max());

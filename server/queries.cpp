@@ -150,6 +150,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
       pose.set_session_name(o.session);
       *pose.mutable_t_world_object() = toProto(o.T_world_object);
       pose.set_segment_id(uint64_t(o.raw_segment_id));
+      for (const uint32_t part : o.parts) pose.add_parts(part);
       if (o.raw_segment_id > 0) segments.insert(uint64_t(o.raw_segment_id));
     }
     for (uint64_t s : segments) stats.add_segment_ids(s);

@@ -138,6 +138,11 @@ ALTER TABLE models ADD COLUMN structure INTEGER NOT NULL DEFAULT 0;
 ALTER TABLE raw_segments ADD COLUMN observation_depth_m REAL NOT NULL DEFAULT 0;
 )sql";
 
+// Whole objects (issue 18): the GSM labels a raw segment is made of, comma-separated.
+constexpr const char* kSchemaV4 = R"sql(
+ALTER TABLE raw_segments ADD COLUMN parts TEXT NOT NULL DEFAULT '';
+)sql";
+
 }  // namespace
 
 const std::vector<Migration>& schemaMigrations() {
@@ -145,6 +150,7 @@ const std::vector<Migration>& schemaMigrations() {
       {1, "sessions, scene maps, raw segments, models, observations, merge records", kSchemaV1},
       {2, "saved live maps of open sessions", kSchemaV2},
       {3, "room structure: models.structure, raw_segments.observation_depth_m", kSchemaV3},
+      {4, "whole objects: raw_segments.parts", kSchemaV4},
   };
   return migrations;
 }

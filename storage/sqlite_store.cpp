@@ -20,6 +20,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "core/common/logging.h"
 
@@ -54,6 +56,21 @@ constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks", "sav
 // Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
 Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
   return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
+}
+
+// raw_segments.parts: GSM labels, comma-separated ("" = none recorded: a segment stored before
+// schema 4). Anything else is damage.
+StatusOr<std::vector<uint32_t>> parseParts(const std::string& text) {
+  std::vector<uint32_t> parts;
+  if (text.empty()) return parts;
+  for (const absl::string_view item : absl::StrSplit(text, ',')) {
+    uint32_t label = 0;
+    if (!absl::SimpleAtoi(item, &label) || label == 0) {
+      return absl::DataLossError(absl::StrFormat("parts \"%s\" is not a list of GSM labels", text));
+    }
+    parts.push_back(label);
+  }
+  return parts;
 }
 
 EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
@@ -407,17 +424,17 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
             *writer_,
             absl::StrFormat(
                 "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
-                "extraction_frame, observation_depth_m, extracted_at) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, %s) "
+                "extraction_frame, observation_depth_m, parts, extracted_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, %s) "
                 "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
                 "grid = excluded.grid, voxels = excluded.voxels, "
                 "extraction_frame = excluded.extraction_frame, "
-                "observation_depth_m = excluded.observation_depth_m, "
+                "observation_depth_m = excluded.observation_depth_m, parts = excluded.parts, "
                 "extracted_at = excluded.extracted_at",
                 kNow)));
     s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, pose).bindBlob(4, grid);
     s.bindBlob(5, voxels).bind(6, segment.extraction_frame);
-    s.bind(7, double(segment.observation_depth_m));
+    s.bind(7, double(segment.observation_depth_m)).bind(8, absl::StrJoin(segment.parts, ","));
     OBJDB_RETURN_IF_ERROR(s.run());
     return txn.commit();
   };
@@ -431,7 +448,7 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
       Statement s,
       Statement::prepare(*lease,
                          "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame, "
-                         "r.observation_depth_m "
+                         "r.observation_depth_m, r.parts "
                          "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
                          "WHERE s.name = ? AND r.label = ?"));
   s.bind(1, key.session).bind(2, int64_t(key.label));
@@ -453,6 +470,9 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
   record->voxels = std::move(*voxels);
   record->extraction_frame = s.columnInt(4);
   record->observation_depth_m = float(s.columnDouble(5));
+  auto parts = parseParts(s.columnText(6));
+  if (!parts.ok()) return inRow(parts.status(), "raw_segments", id, "parts");
+  record->parts = std::move(*parts);
   return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
 }
 
@@ -696,8 +716,9 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
       Statement o,
       Statement::prepare(*lease,
                          "SELECT o.rowid, s.name, o.label, COALESCE(o.raw_segment_id, 0), "
-                         "o.T_world_object FROM observations o JOIN sessions s ON "
-                         "s.id = o.session_id WHERE o.model_id = ? ORDER BY o.seq"));
+                         "o.T_world_object, COALESCE(r.parts, '') FROM observations o JOIN "
+                         "sessions s ON s.id = o.session_id LEFT JOIN raw_segments r ON "
+                         "r.id = o.raw_segment_id WHERE o.model_id = ? ORDER BY o.seq"));
   for (ModelSummary& m : out) {
     OBJDB_RETURN_IF_ERROR(o.reset());
     o.bind(1, m.id);
@@ -706,8 +727,10 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
       if (!more) break;
       auto T_wo = decodeTransform(o.columnBlob(4));
       if (!T_wo.ok()) return inRow(T_wo.status(), "observations", o.columnInt(0), "T_world_object");
+      auto parts = parseParts(o.columnText(5));
+      if (!parts.ok()) return inRow(parts.status(), "raw_segments", o.columnInt(3), "parts");
       m.observations.push_back(
-          {o.columnText(1), uint32_t(o.columnInt(2)), o.columnInt(3), *T_wo});
+          {o.columnText(1), uint32_t(o.columnInt(2)), o.columnInt(3), *T_wo, std::move(*parts)});
     }
   }
   OBJDB_RETURN_IF_ERROR(snapshot.commit());

@@ -134,6 +134,7 @@ struct ModelSummary {
     uint32_t label = 0;           // GSM label of the observing raw segment
     int64_t raw_segment_id = 0;   // raw_segments row (0 when the segment row is gone)
     Transform T_world_object = Transform::Identity();
+    std::vector<uint32_t> parts;  // the raw segment's GSM labels (its object's parts), sorted
   };
   int64_t id = 0;
   std::string state;             // "active" or "merged" (removed models are never listed)

@@ -34,6 +34,7 @@ struct RawSegmentRecord {
   std::vector<tsdf::VoxelIndex> voxels;  // the label's voxels, segment frame
   int64_t extraction_frame = 0;
   float observation_depth_m = 0.0f;      // RawSegment::observation_depth_m (0: unknown)
+  std::vector<uint32_t> parts;           // RawSegment::parts: the object's GSM labels, sorted
 };
 
 // Evidence of one merge (the numbers the verification produced), persisted with it.

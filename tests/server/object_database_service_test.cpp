@@ -8,6 +8,7 @@
 #include <sys/resource.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <filesystem>
@@ -202,6 +203,15 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
   EXPECT_EQ(streamed.responses.back().summary().state(), v1::SESSION_STATE_OPEN);
   EXPECT_EQ(streamed.count(v1::IngestResponse::kSegment),
             streamed.count(v1::IngestResponse::kObject));
+  // Every extracted segment lists the GSM labels it is made of (a whole object's parts); its
+  // label is the object's id, its smallest part.
+  for (const auto& response : streamed.responses) {
+    if (!response.has_segment()) continue;
+    const v1::SegmentExtracted& e = response.segment();
+    ASSERT_GT(e.parts_size(), 0) << "segment " << e.gsm_label();
+    EXPECT_EQ(e.parts(0), e.gsm_label());
+    EXPECT_TRUE(std::is_sorted(e.parts().begin(), e.parts().end()));
+  }
 
   v1::EndSessionResponse ended;
   const grpc::Status end = endSession(*stub, "monday", &ended);
@@ -247,6 +257,9 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
     EXPECT_EQ(size_t(detail.poses_size()), offline.front()->observations.size());
     EXPECT_EQ(detail.poses(0).session_name(), "monday");
     EXPECT_GT(detail.poses(0).segment_id(), 0u);
+    // The pose names the parts of the segment that observed it, as stored with it.
+    ASSERT_GT(detail.poses(0).parts_size(), 0);
+    EXPECT_EQ(detail.poses(0).parts(0), offline.front()->observations.front().label);
     EXPECT_EQ(size_t(detail.cloud().points_size()), 3 * offline.front()->cloud.points.size());
     EXPECT_EQ(detail.stats().num_points(), offline.front()->cloud.points.size());
     EXPECT_GT(detail.mesh().triangles_size(), 0);

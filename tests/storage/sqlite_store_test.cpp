@@ -163,7 +163,8 @@ TEST(SqliteStore, ReplaceAndRemoveKeepIdsStableAndNeverReuseThem) {
 TEST(SqliteStore, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   TempDir dir;
   auto store = openStore(dir / "db.sqlite");
-  const auto first = makeRawSegment("monday", 4, 1);
+  auto first = makeRawSegment("monday", 4, 1);
+  first.parts = {4, 9, 12};  // a whole object of three GSM labels
   ASSERT_TRUE(store->putRawSegment(first).ok());
   auto loaded = store->rawSegment({"monday", 4});
   ASSERT_TRUE(loaded.ok()) << loaded.status();
@@ -171,10 +172,13 @@ TEST(SqliteStore, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   EXPECT_EQ(diffLayers(*(*loaded)->grid, *first.grid), "");
   EXPECT_EQ((*loaded)->voxels, first.voxels);
   EXPECT_EQ((*loaded)->extraction_frame, first.extraction_frame);
+  EXPECT_EQ((*loaded)->parts, first.parts);
 
-  const auto again = makeRawSegment("monday", 4, 2);
+  auto again = makeRawSegment("monday", 4, 2);
+  again.parts = {4};
   ASSERT_TRUE(store->putRawSegment(again).ok());
   EXPECT_EQ(store->rawSegment({"monday", 4}).value()->voxels, again.voxels);
+  EXPECT_EQ(store->rawSegment({"monday", 4}).value()->parts, again.parts);
   const StoreStats stats = store->stats().value();
   for (const auto& t : stats.tables) {
     if (t.table == "raw_segments") {
@@ -569,8 +573,10 @@ TEST(SqliteStore, AFileOfTheFirstSchemaIsMigratedToTheCurrentOne) {
   segment.grid = std::make_shared<const tsdf::TsdfLayer>(makeStoreModel(1, 2).grid.clone());
   segment.voxels = {tsdf::VoxelIndex(1, 2, 3)};
   segment.observation_depth_m = 2.75f;
+  segment.parts = {4, 7};
   ASSERT_TRUE((*store)->putRawSegment(segment).ok());
   EXPECT_FLOAT_EQ((*store)->rawSegment({"s", 4}).value()->observation_depth_m, 2.75f);
+  EXPECT_EQ((*store)->rawSegment({"s", 4}).value()->parts, (std::vector<uint32_t>{4, 7}));
   const model::ObjectModel source = makeStoreModel(1, 2);
   ASSERT_TRUE((*store)->putSavedMap("s", 3, source.grid, {}).ok());
   EXPECT_EQ((*store)->savedMap("s").value().frames, 3);
