@@ -359,13 +359,13 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
 
 namespace {
 
-// The voxels of block `b` whose label (by `labelOf(i)`, i = the voxel's index in the block)
-// is `label`, appended to `voxels`.
-template <typename LabelOf>
-void appendLabelVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Label label,
-                       LabelOf&& labelOf, std::vector<tsdf::VoxelIndex>* voxels) {
+// The voxels of block `b` for which `keep(i)` holds (i = the voxel's index in the block),
+// appended to `voxels`.
+template <typename Keep>
+void appendBlockVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Keep&& keep,
+                       std::vector<tsdf::VoxelIndex>* voxels) {
   for (size_t i = 0; i < count; ++i) {
-    if (labelOf(i) != label) continue;
+    if (!keep(i)) continue;
     const int x = int(i % size_t(vps)), y = int((i / size_t(vps)) % size_t(vps)),
               z = int(i / size_t(vps * vps));
     voxels->push_back(b * vps + Eigen::Vector3i(x, y, z));
@@ -382,7 +382,7 @@ RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
   });
   RawSegment segment{label, Transform::Identity(),
                      tsdf::TsdfLayer::create(layer.voxelSize(), layer.voxelsPerSide()).value(),
-                     {}, last_update_frame, frame};
+                     {}, last_update_frame, frame, 0.0f, {}};
   if (voxels.empty()) return segment;
   Eigen::Vector3i lo = voxels.front();
   for (const auto& v : voxels) lo = lo.cwiseMin(v);
@@ -429,7 +429,8 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
     for (const Label label : parts) {
       for (const tsdf::BlockIndex& b : blocks_of[label]) {
         const std::vector<Label>& block = labels.at(b);
-        appendLabelVoxels(b, block.size(), vps, label, [&](size_t i) { return block[i]; }, &voxels);
+        appendBlockVoxels(b, block.size(), vps, [&](size_t i) { return block[i] == label; },
+                          &voxels);
       }
     }
     if (voxels.size() < size_t(std::max(params.min_label_voxels, 1))) continue;
@@ -459,12 +460,9 @@ std::vector<tsdf::VoxelIndex> Gsm::voxelsOf(const std::vector<Label>& labels) co
     const auto it = label_blocks_.find(b);
     if (it == label_blocks_.end()) continue;
     const std::vector<LabelVoxel>& block = it->second;
-    for (size_t i = 0; i < block.size(); ++i) {
-      if (block[i].empty()) continue;
-      if (!std::binary_search(labels.begin(), labels.end(), mainOf(block[i]))) continue;
-      voxels.push_back(b * vps + Eigen::Vector3i(int(i % size_t(vps)), int((i / size_t(vps)) % size_t(vps)),
-                                                 int(i / size_t(vps * vps))));
-    }
+    appendBlockVoxels(b, block.size(), vps, [&](size_t i) {
+      return !block[i].empty() && std::binary_search(labels.begin(), labels.end(), mainOf(block[i]));
+    }, &voxels);
   }
   return voxels;
 }

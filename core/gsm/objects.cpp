@@ -36,21 +36,19 @@ struct Contact {
   std::vector<tsdf::VoxelIndex> side[2];
 };
 
+// The main label of a voxel (0: none), with the layer's block arithmetic.
 class LabelLookup {
  public:
-  LabelLookup(const LabelBlocks& labels, int vps) : labels_(labels), vps_(vps) {}
+  LabelLookup(const LabelBlocks& labels, const tsdf::TsdfLayer& layer)
+      : labels_(labels), layer_(layer) {}
   Label at(const tsdf::VoxelIndex& v) const {
-    const tsdf::BlockIndex b(floorDiv(v.x()), floorDiv(v.y()), floorDiv(v.z()));
-    const auto it = labels_.find(b);
-    if (it == labels_.end()) return 0;
-    const Eigen::Vector3i l = v - b * vps_;
-    return it->second[size_t(l.x() + vps_ * (l.y() + vps_ * l.z()))];
+    const auto it = labels_.find(layer_.blockOfVoxel(v));
+    return it == labels_.end() ? 0 : it->second[layer_.linearInBlock(v)];
   }
 
  private:
-  int floorDiv(int a) const { return a >= 0 ? a / vps_ : -((-a + vps_ - 1) / vps_); }
   const LabelBlocks& labels_;
-  int vps_;
+  const tsdf::TsdfLayer& layer_;
 };
 
 // Orients `shape.normal` towards the side the TSDF is positive on (free space, where the camera
@@ -269,7 +267,7 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       }
     }
   }
-  const LabelLookup lookup(labels, vps);
+  const LabelLookup lookup(labels, layer);
   const float probe = params.object_support_probe_m / voxel;
   // In label order, so the grouping does not depend on hash order.
   std::vector<uint64_t> keys;
@@ -302,14 +300,13 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
   // grouped without the cut, spans at most object_support_max_ratio of the support's extent
   // along both of its axes (a mug, a box, a monitor on a table). A pedestal on its base carries
   // a seat or a table top as wide as the base, and stays part of that object.
-  absl::flat_hash_map<Label, std::vector<Label>> component;
-  for (const auto& [l, s] : shapes) component[findRoot(&parent, l)].push_back(l);
   for (const auto& [upper, support] : supported) {
     const Label ru = findRoot(&parent, upper), rs = findRoot(&parent, support);
     if (ru == rs) continue;
     const Shape& sb = shapes[support];
     float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
-    for (const Label l : component[ru]) {
+    for (const auto& [l, unused] : shapes) {
+      if (findRoot(&parent, l) != ru) continue;  // not in the resting object
       for (const auto& v : voxels_of[l]) {
         for (int axis = 0; axis < 2; ++axis) {
           const float x = v.cast<float>().dot(sb.axis[axis]);
@@ -325,17 +322,8 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     }
     if (smaller) {
       ++out.supports;
-      continue;
-    }
-    std::vector<Label> moved = std::move(component[ru]);
-    std::vector<Label>& into = component[rs];
-    into.insert(into.end(), moved.begin(), moved.end());
-    component.erase(ru);
-    unite(upper, support);
-    const Label root = findRoot(&parent, upper);
-    if (root != rs) {  // the component is listed under its new root
-      component[root] = std::move(component[rs]);
-      component.erase(rs);
+    } else {
+      unite(upper, support);
     }
   }
   for (const auto& [l, s] : shapes) {

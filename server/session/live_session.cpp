@@ -149,7 +149,7 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
     RawSegmentJob job{gsm::RawSegment{label, Transform::Identity(),
                                       tsdf::TsdfLayer::create(map.voxelSize(), map.voxelsPerSide())
                                           .value(),
-                                      {}, 0, 0, 0.0f},
+                                      {}, 0, 0, 0.0f, {}},
                       reason, session.last_index, nullptr, /*withdraw=*/true};  // label only
     jobs.push_back(std::move(job));
   }
