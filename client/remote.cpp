@@ -8,6 +8,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "server/address.h"
+#include "server/proto_convert.h"
 
 namespace objdb::cli {
 
@@ -107,6 +108,24 @@ int reportRpcError(const char* command, const std::string& what, const std::stri
     std::fprintf(stderr, "  (the token is missing or not the server's: --token-file FILE)\n");
   }
   return 1;
+}
+
+grpc::Status fetchSceneMesh(v1::ObjectDatabase::Stub& stub, const std::string& session,
+                            bool completed, double timeout_s, TriangleMesh* mesh, size_t* chunks) {
+  grpc::ClientContext context;
+  if (timeout_s > 0.0) setDeadline(&context, timeout_s);
+  v1::GetSceneMeshRequest request;
+  request.set_session_name(session);
+  request.set_completed(completed);
+  auto reader = stub.GetSceneMesh(&context, request);
+  v1::MeshChunk chunk;
+  size_t n = 0;
+  while (reader->Read(&chunk)) {
+    mesh->append(server::meshFromProto(chunk.mesh()));
+    ++n;
+  }
+  if (chunks != nullptr) *chunks = n;
+  return reader->Finish();
 }
 
 }  // namespace objdb::cli

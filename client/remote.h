@@ -9,6 +9,7 @@
 #include <memory>
 #include <string>
 
+#include "core/common/mesh.h"
 #include "core/common/status.h"
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "server/auth.h"
@@ -48,5 +49,11 @@ void setDeadline(grpc::ClientContext* context, double seconds);
 // when the server cannot be reached); returns 1.
 int reportRpcError(const char* command, const std::string& what, const std::string& server,
                    const grpc::Status& status);
+
+// A session's scene mesh (GetSceneMesh; `completed`: filled by the merged models), its chunks
+// appended into `mesh`; `chunks` gets their number when not null. A timeout of 0 sets no deadline.
+grpc::Status fetchSceneMesh(v1::ObjectDatabase::Stub& stub, const std::string& session,
+                            bool completed, double timeout_s, TriangleMesh* mesh,
+                            size_t* chunks = nullptr);
 
 }  // namespace objdb::cli

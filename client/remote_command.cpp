@@ -169,20 +169,10 @@ int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
 }
 
 int scene(v1::ObjectDatabase::Stub& stub, const Options& o) {
-  grpc::ClientContext context;
-  cli::setDeadline(&context, o.timeout_s);
-  v1::GetSceneMeshRequest request;
-  request.set_session_name(o.session);
-  request.set_completed(o.completed);
-  auto reader = stub.GetSceneMesh(&context, request);
   TriangleMesh mesh;
-  v1::MeshChunk chunk;
   size_t chunks = 0;
-  while (reader->Read(&chunk)) {
-    mesh.append(server::meshFromProto(chunk.mesh()));
-    ++chunks;
-  }
-  const grpc::Status status = reader->Finish();
+  const grpc::Status status =
+      cli::fetchSceneMesh(stub, o.session, o.completed, o.timeout_s, &mesh, &chunks);
   if (!status.ok()) return cli::reportRpcError(kCommand, "GetSceneMesh", o.connection.server, status);
   if (Status written = io::writePlyMesh(o.out, mesh); !written.ok()) {
     return cli::reportError(kCommand, written);

@@ -280,8 +280,7 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
         // A deadline or a cancel stops the work between models.
         OBJDB_ASSIGN_OR_RETURN(
             const tsdf::TsdfLayer full,
-            completion::completeScene(*store_, name, options_.params.merging,
-                                      params.tsdf.max_weight, nullptr,
+            completion::completeScene(*store_, name, options_.params.merging, params.tsdf, nullptr,
                                       [context] { return context->IsCancelled(); }));
         mesh = tsdf::extractMesh(full, params.tsdf.mesh_min_weight);
       } else {

@@ -31,9 +31,10 @@ std::vector<tsdf::VoxelIndex> objectRegion(const model::ObjectModel& model, int 
 
 StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
                                         const std::string& session, const MergingParams& merging,
-                                        float max_weight, CompletionReport* report,
+                                        const TsdfParams& tsdf, CompletionReport* report,
                                         const std::function<bool()>& cancelled) {
   OBJDB_RETURN_IF_ERROR(merging.validate());
+  OBJDB_RETURN_IF_ERROR(tsdf.validate());
   OBJDB_ASSIGN_OR_RETURN(const auto scene, store.scene(session));
   if (scene == nullptr) {
     return absl::NotFoundError(absl::StrFormat("completion: no scene map for session %s", session));
@@ -77,9 +78,12 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
       p.verified = p.verdict.accepted;
       if (p.verified) {
         if (region.empty()) region = objectRegion(*model, merging.completion_margin_voxels);
+        matching::MergeOptions fill;
+        fill.mode = matching::MergeMode::kFillUnobserved;
+        fill.observed_min_weight = tsdf.mesh_min_weight;
+        fill.source_region = &region;
         p.filled_voxels = matching::mergeGrids(&completed, model->grid, o.T_world_object,
-                                               max_weight, matching::MergeMode::kFillUnobserved,
-                                               &p.filled_surface_voxels, &region);
+                                               tsdf.max_weight, fill, &p.filled_surface_voxels);
       }
       out.filled_voxels += p.filled_voxels;
       out.placements.push_back(p);

@@ -1,8 +1,10 @@
 // Scene completion (paper §III-C, last step; issue 5 deliverable 4): the merged object models are
 // placed at each pose where a session observed them; where a placed model verifies against the
 // session's scene TSDF (the same e_TSDF / o_TSDF test as merging), its voxels around its own
-// surface voxels (MergingParams::completion_margin_voxels) fill what the scene never observed.
-// What the scene measured is kept: completion adds, it does not overwrite.
+// surface voxels (MergingParams::completion_margin_voxels) fill what the scene did not observe:
+// voxels it never saw, and voxels seen too little to be meshed (weight below the scene's
+// TsdfParams::mesh_min_weight), which are fused with the model by weight. What the scene measured
+// is kept: completion adds, it does not overwrite.
 #pragma once
 
 #include <functional>
@@ -39,11 +41,13 @@ struct CompletionReport {
 
 // The models observed in `session` (every observation of every stored model), completed into a
 // copy of the session's scene map. Models built from a single segment add nothing (they are the
-// scene's own data) and are skipped. Errors: the session has no scene map in the store.
+// scene's own data) and are skipped. `tsdf`: the session's volume parameters (max_weight caps the
+// fused weights, mesh_min_weight says what the scene observed). Errors: the session has no scene
+// map in the store.
 // `cancelled`, when given, is asked before each model: true ends the work with CANCELLED.
 StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
                                         const std::string& session, const MergingParams& merging,
-                                        float max_weight, CompletionReport* report,
+                                        const TsdfParams& tsdf, CompletionReport* report,
                                         const std::function<bool()>& cancelled = {});
 
 }  // namespace objdb::completion

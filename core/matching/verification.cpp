@@ -63,9 +63,10 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 }
 
 size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
-                  const Transform& T_target_source, float max_weight, MergeMode mode,
-                  size_t* written_near_surface,
-                  const std::vector<tsdf::VoxelIndex>* source_region) {
+                  const Transform& T_target_source, float max_weight,
+                  const MergeOptions& options, size_t* written_near_surface) {
+  const MergeMode mode = options.mode;
+  const std::vector<tsdf::VoxelIndex>* source_region = options.source_region;
   const Eigen::Isometry3f T_source_target = T_target_source.inverse().cast<float>();
   const Eigen::Isometry3f T_ts = T_target_source.cast<float>();
   // Target voxels to write: the observed ones, and those around every observed source voxel.
@@ -102,7 +103,10 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
   std::vector<Write> writes;
   for (const tsdf::VoxelIndex& v : candidates) {
     const tsdf::TsdfVoxel* t = target->voxel(v);
-    if (mode == MergeMode::kFillUnobserved && t && t->weight > 0.0f) continue;
+    if (mode == MergeMode::kFillUnobserved && t && t->weight > 0.0f &&
+        t->weight >= options.observed_min_weight) {
+      continue;
+    }
     float ds = 0.0f, ws = 0.0f;
     if (!source.interpolate(T_source_target * target->voxelCenter(v), &ds, &ws)) continue;
     const float wt = t ? t->weight : 0.0f;

@@ -38,18 +38,25 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 // t̂ = target ⊕ source: `source` resampled into target's lattice (T_target_source maps source into
 // target) and fused by weight: d = (w_t d_t + w_s d_s) / (w_t + w_s), w = min(w_t + w_s,
 // max_weight). Voxels only the source observed are added. Grids must share the voxel size.
-// kFillUnobserved (scene completion) leaves every observed target voxel as it is. Returns the
+// kFillUnobserved (scene completion) leaves the target's observed voxels as they are. Returns the
 // number of target voxels written; `written_near_surface` gets those within one voxel of the
-// surface (|distance| ≤ voxel size). With `source_region`, only the target voxels around those
-// source voxels are written (and, for kFuse, the target's observed ones); interpolation still
-// reads the whole source.
+// surface (|distance| ≤ voxel size).
 enum class MergeMode {
   kFuse,            // weighted average where both observed, source values where only it did
-  kFillUnobserved,  // only voxels the target never observed get the source's values
+  kFillUnobserved,  // only voxels the target did not observe (MergeOptions) are written
+};
+struct MergeOptions {
+  MergeMode mode = MergeMode::kFuse;
+  // kFillUnobserved: target voxels at least this heavy count as observed and are kept. Lighter
+  // ones (a scene's voxels seen too little to be meshed, below its mesh_min_weight) are fused with
+  // the source like unobserved ones. 0: every voxel with weight counts as observed.
+  float observed_min_weight = 0.0f;
+  // When given, only the target voxels around these source voxels are written (and, for kFuse,
+  // the target's observed ones); interpolation still reads the whole source.
+  const std::vector<tsdf::VoxelIndex>* source_region = nullptr;
 };
 size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
                   const Transform& T_target_source, float max_weight,
-                  MergeMode mode = MergeMode::kFuse, size_t* written_near_surface = nullptr,
-                  const std::vector<tsdf::VoxelIndex>* source_region = nullptr);
+                  const MergeOptions& options = {}, size_t* written_near_surface = nullptr);
 
 }  // namespace objdb::matching

@@ -414,4 +414,14 @@ StatusOr<BuiltScene> buildScene(const Scene& scene) {
   return built;
 }
 
+TriangleMesh trueSurface(const BuiltScene& built) {
+  TriangleMesh out;
+  for (const auto& instance : built.instances) {
+    TriangleMesh m = *instance.mesh;
+    m.transform(instance.T_world_object);
+    out.append(m);
+  }
+  return out;
+}
+
 }  // namespace objdb::sim

@@ -73,4 +73,7 @@ struct BuiltScene {
 };
 StatusOr<BuiltScene> buildScene(const Scene& scene);
 
+// Every instance's mesh (objects, floor, walls) in the world frame: the scene's true surfaces.
+TriangleMesh trueSurface(const BuiltScene& built);
+
 }  // namespace objdb::sim

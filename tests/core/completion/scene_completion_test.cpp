@@ -56,7 +56,7 @@ TEST(CompleteScene, FillsTheSideOfAnObjectThatOnlyAnotherSessionSaw) {
   ASSERT_FALSE(scene->interpolateDistance(back_world, &d));
 
   CompletionReport report;
-  auto completed = completeScene(f.store, "monday", params().merging, 1000.0f, &report);
+  auto completed = completeScene(f.store, "monday", params().merging, params().tsdf, &report);
   ASSERT_TRUE(completed.ok()) << completed.status();
   ASSERT_EQ(report.placements.size(), 1u);
   const Placement& p = report.placements[0];
@@ -77,7 +77,7 @@ TEST(CompleteScene, FillsTheSideOfAnObjectThatOnlyAnotherSessionSaw) {
 
   // Asked to stop, it stops before the model and says how far it got.
   size_t asked = 0;
-  auto stopped = completeScene(f.store, "monday", params().merging, 1000.0f, &report, [&] {
+  auto stopped = completeScene(f.store, "monday", params().merging, params().tsdf, &report, [&] {
     ++asked;
     return true;
   });
@@ -124,22 +124,23 @@ TEST(CompleteScene, FillsTheObjectButNotWhatStoodNearItInAnotherSession) {
 
   Params p = params();
   CompletionReport report;
-  auto completed = completeScene(f.store, "monday", p.merging, 1000.0f, &report);
+  auto completed = completeScene(f.store, "monday", p.merging, p.tsdf, &report);
   ASSERT_TRUE(completed.ok()) << completed.status();
   ASSERT_EQ(report.placements.size(), 1u);
   EXPECT_TRUE(completed->interpolateDistance(back_world, &d));
   EXPECT_FALSE(completed->interpolateDistance(plate_world, &d)) << "the plate was pasted: " << d;
   // The largest margin (4 voxels, 8 cm) does not reach it either.
   p.merging.completion_margin_voxels = 4;
-  auto widest = completeScene(f.store, "monday", p.merging, 1000.0f, nullptr);
+  auto widest = completeScene(f.store, "monday", p.merging, p.tsdf, nullptr);
   ASSERT_TRUE(widest.ok());
   EXPECT_FALSE(widest->interpolateDistance(plate_world, &d));
   // The model's whole grid, filled at the same placement, brings the plate along: the region is
   // what keeps it out.
   const auto model = f.store.model(report.placements[0].model_id).value();
   tsdf::TsdfLayer whole = f.store.scene("monday").value()->clone();
-  matching::mergeGrids(&whole, model->grid, report.placements[0].T_world_object, 1000.0f,
-                       matching::MergeMode::kFillUnobserved);
+  matching::MergeOptions fill;
+  fill.mode = matching::MergeMode::kFillUnobserved;
+  matching::mergeGrids(&whole, model->grid, report.placements[0].T_world_object, 1000.0f, fill);
   EXPECT_TRUE(whole.interpolateDistance(plate_world, &d));
 }
 
@@ -147,11 +148,11 @@ TEST(CompleteScene, SingleSegmentModelsAddNothingAndAMissingSceneIsAnError) {
   Fixture f;
   ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
   CompletionReport report;
-  auto completed = completeScene(f.store, "monday", params().merging, 1000.0f, &report);
+  auto completed = completeScene(f.store, "monday", params().merging, params().tsdf, &report);
   ASSERT_TRUE(completed.ok());
   EXPECT_TRUE(report.placements.empty());
   EXPECT_EQ(completed->numObservedVoxels(), f.store.scene("monday").value()->numObservedVoxels());
-  const auto missing = completeScene(f.store, "friday", params().merging, 1000.0f, nullptr);
+  const auto missing = completeScene(f.store, "friday", params().merging, params().tsdf, nullptr);
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
   EXPECT_THAT(std::string(missing.status().message()), HasSubstr("session friday"));
 }

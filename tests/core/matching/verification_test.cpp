@@ -124,8 +124,10 @@ TEST(MergeGrids, FillUnobservedLeavesObservedVoxelsAlone) {
   tsdf::TsdfLayer target = linearField(0.0f, 2.0f, -0.1f, 0.1f);
   const tsdf::TsdfLayer source = linearField(0.01f, 1.0f, -0.1f, 0.3f);
   size_t near_surface = 0;
-  const size_t written = mergeGrids(&target, source, Transform::Identity(), 100.0f,
-                                    MergeMode::kFillUnobserved, &near_surface);
+  MergeOptions fill;
+  fill.mode = MergeMode::kFillUnobserved;
+  const size_t written =
+      mergeGrids(&target, source, Transform::Identity(), 100.0f, fill, &near_surface);
   EXPECT_GT(written, 0u);
   EXPECT_GT(near_surface, 0u);
   EXPECT_LT(near_surface, written);  // the band is wider than one voxel
@@ -137,6 +139,25 @@ TEST(MergeGrids, FillUnobservedLeavesObservedVoxelsAlone) {
   const tsdf::VoxelIndex only = target.voxelIndexOf(Eigen::Vector3f(0.2f, 0.0f, 0.013f));
   ASSERT_NE(target.voxel(only), nullptr);
   EXPECT_NEAR(target.voxel(only)->distance, target.voxelCenter(only).z() - 0.01f, 1e-6f);
+}
+
+TEST(MergeGrids, FillUnobservedFusesTargetVoxelsTooLightToBeMeshed) {
+  // The target saw the slab twice (weight 2); a scene meshed at weight 3 never showed it.
+  tsdf::TsdfLayer target = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  const tsdf::TsdfLayer source = linearField(0.01f, 1.0f, -0.1f, 0.3f);
+  MergeOptions fill;
+  fill.mode = MergeMode::kFillUnobserved;
+  fill.observed_min_weight = 3.0f;
+  mergeGrids(&target, source, Transform::Identity(), 100.0f, fill);
+  // Fused by weight, as kFuse would: (2 · z + 1 · (z − 0.01)) / 3, weight 3.
+  const tsdf::VoxelIndex light = target.voxelIndexOf(Eigen::Vector3f(0.0f, 0.0f, 0.013f));
+  EXPECT_NEAR(target.voxel(light)->distance, target.voxelCenter(light).z() - 0.01f / 3.0f, 1e-6f);
+  EXPECT_FLOAT_EQ(target.voxel(light)->weight, 3.0f);
+  // At the threshold a voxel counts as observed and is kept.
+  tsdf::TsdfLayer heavy = linearField(0.0f, 3.0f, -0.1f, 0.1f);
+  mergeGrids(&heavy, source, Transform::Identity(), 100.0f, fill);
+  EXPECT_NEAR(heavy.voxel(light)->distance, heavy.voxelCenter(light).z(), 1e-6f);
+  EXPECT_FLOAT_EQ(heavy.voxel(light)->weight, 3.0f);
 }
 
 TEST(MergeGrids, ASourceRegionLimitsTheFillToItsNeighbourhood) {
@@ -152,8 +173,10 @@ TEST(MergeGrids, ASourceRegionLimitsTheFillToItsNeighbourhood) {
     }
   }
   region.push_back(tsdf::VoxelIndex(1000, 1000, 1000));  // unobserved: ignored
-  const size_t written = mergeGrids(&target, source, Transform::Identity(), 100.0f,
-                                    MergeMode::kFillUnobserved, nullptr, &region);
+  MergeOptions fill;
+  fill.mode = MergeMode::kFillUnobserved;
+  fill.source_region = &region;
+  const size_t written = mergeGrids(&target, source, Transform::Identity(), 100.0f, fill);
   EXPECT_GT(written, 0u);
   EXPECT_LE(written, region.size() * 8);
   // Inside the region: filled with the source's values.
