@@ -240,7 +240,7 @@ int main(int argc, char** argv) {
                                                            segment.last_update_frame,
                                                            segment.extraction_frame,
                                                            segment.observation_depth_m,
-                                                           segment.parts});
+                                                           segment.parts, segment.voxel_parts});
       auto report = (*db)->insertSegment(scene.name, segment);
       if (!report.ok()) {
         std::fprintf(stderr, "insert %s/%u: %s\n", scene.name.c_str(), label,

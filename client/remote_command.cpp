@@ -19,7 +19,8 @@ constexpr const char* kCommand = "remote";
 
 constexpr const char* kUsage = R"(usage: objdb remote stats    [--server HOST:PORT]
        objdb remote sessions [--server HOST:PORT]
-       objdb remote objects  [--server HOST:PORT] [--session NAME] [--merged]
+       objdb remote objects  [--server HOST:PORT] [--session NAME] [--merged] [--structure]
+                             [--parts]
        objdb remote object   [--server HOST:PORT] --id ID [--out FILE.ply --what mesh|cloud]
        objdb remote scene    [--server HOST:PORT] --session NAME --out FILE.ply [--completed]
 
@@ -27,10 +28,12 @@ Asks a running objdb server (objdb-server) about its database.
 
   stats     server and database statistics (GetStats)
   sessions  every session: state, frames, start and end time, client (ListSessions)
-  objects   the objects, one line each: sessions, poses, extent, surface (object, planar or
-            structure) (ListObjects; every page)
-  object    one object's poses and statistics (GetObject); with --out its mesh (default) or its
-            surface cloud with normals, in the object's base frame, as PLY
+  objects   the whole objects, one line each: sessions, poses, extent, surface (object or
+            planar) (ListObjects; every page); --structure lists room structure too (floors,
+            walls, partitions), --parts adds a line per part of each object at each pose (its
+            GSM label, voxels and extent)
+  object    one object's poses, parts and statistics (GetObject); with --out its mesh (default)
+            or its surface cloud with normals, in the object's base frame, as PLY
   scene     a session's mesh in its world frame as PLY (GetSceneMesh); --completed fills what the
             session never saw with the database's merged models
 
@@ -42,7 +45,7 @@ struct Options {
   cli::Connection connection;
   std::string session, out, what = "mesh";
   long long id = 0;
-  bool merged = false, completed = false;
+  bool merged = false, completed = false, structure = false, parts = false;
   double timeout_s = 600.0;
 };
 
@@ -99,10 +102,20 @@ int sessions(v1::ObjectDatabase::Stub& stub, const Options& o) {
   }
 }
 
+void printParts(const google::protobuf::RepeatedPtrField<v1::ObjectPart>& parts) {
+  for (const auto& p : parts) {
+    std::printf("           part %-6u of %-20s segment %-6llu %6u voxels, extent %s m\n", p.label(),
+                p.session_name().c_str(), (unsigned long long)p.segment_id(), p.num_voxels(),
+                extent(p.bounds_object()).c_str());
+  }
+}
+
 int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
   v1::ListObjectsRequest request;
   request.set_session_name(o.session);
   request.set_include_merged(o.merged);
+  request.set_include_structure(o.structure);
+  request.set_include_parts(o.parts);
   request.set_page_size(1000);
   size_t count = 0;
   std::printf("%8s %-7s %6s %6s %-22s %-9s  %s\n", "id", "state", "poses", "places",
@@ -119,6 +132,7 @@ int objects(v1::ObjectDatabase::Stub& stub, const Options& o) {
                   m.num_places(), extent(m.bounds_object()).c_str(),
                   m.structure() ? "structure" : m.planar() ? "planar" : "object",
                   absl::StrJoin(m.session_names(), ", ").c_str());
+      printParts(m.parts());
       ++count;
     }
     if (page.next_page_token().empty()) break;
@@ -135,6 +149,7 @@ int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
   request.set_id(uint64_t(o.id));
   request.set_include_mesh(!o.out.empty() && o.what == "mesh");
   request.set_include_cloud(!o.out.empty() && o.what == "cloud");
+  request.set_include_parts(true);
   v1::ObjectDetail d;
   const grpc::Status status = stub.GetObject(&context, request, &d);
   if (!status.ok()) return cli::reportRpcError(kCommand, "GetObject", o.connection.server, status);
@@ -154,6 +169,7 @@ int object(v1::ObjectDatabase::Stub& stub, const Options& o) {
                 p.session_name().c_str(), T.x(), T.y(), T.z(), T.qx(), T.qy(), T.qz(), T.qw(),
                 (unsigned long long)p.segment_id());
   }
+  printParts(d.parts());
   for (const auto& m : d.merges()) {
     std::printf("  merged %-26s e_ICP %.4f m, e_TSDF %.4f m, o_TSDF %llu, %u scene checks\n",
                 m.source().c_str(), m.icp_rmse_m(), m.tsdf_rmse_m(),
@@ -205,6 +221,14 @@ int runRemoteCommand(int argc, char** argv) {
     }
     if (a == "--completed") {
       o.completed = true;
+      continue;
+    }
+    if (a == "--structure") {
+      o.structure = true;
+      continue;
+    }
+    if (a == "--parts") {
+      o.parts = true;
       continue;
     }
     if (i + 1 >= argc) return cli::usageError(kCommand, a + " needs a value", kUsage);

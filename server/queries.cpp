@@ -15,6 +15,56 @@
 #include "server/session/live_session.h"
 
 namespace objdb::server {
+namespace {
+
+// The parts of `summary` at each of its poses, from the raw segments' voxels (in pose order, then
+// by label); with `voxels`, each part's voxel centres too. A pose whose segment row is gone, or
+// that was stored before parts had geometry, gives none.
+Status addParts(const storage::SqliteStore& store, const storage::ModelSummary& summary,
+                bool voxels, google::protobuf::RepeatedPtrField<v1::ObjectPart>* out) {
+  for (const auto& o : summary.observations) {
+    if (o.raw_segment_id <= 0) continue;
+    OBJDB_ASSIGN_OR_RETURN(const auto segment, store.rawSegment({o.session, o.label}));
+    if (segment->voxel_parts.empty()) continue;
+    const Eigen::Isometry3d T_object_segment = o.T_world_object.inverse() * segment->T_world_segment;
+    std::map<uint32_t, v1::ObjectPart*> part_of;
+    for (const uint32_t label : o.parts) {
+      v1::ObjectPart* part = out->Add();
+      part->set_session_name(o.session);
+      part->set_segment_id(uint64_t(o.raw_segment_id));
+      part->set_label(label);
+      part_of[label] = part;
+    }
+    std::map<uint32_t, std::pair<Eigen::Vector3d, Eigen::Vector3d>> bounds;
+    for (size_t i = 0; i < segment->voxels.size(); ++i) {
+      auto it = part_of.find(segment->voxel_parts[i]);
+      if (it == part_of.end()) {
+        return absl::DataLossError(absl::StrFormat(
+            "raw segment %s/%d: a voxel of part %d, which is not one of its parts", o.session,
+            o.label, segment->voxel_parts[i]));
+      }
+      v1::ObjectPart& part = *it->second;
+      const Eigen::Vector3d p =
+          T_object_segment * segment->grid->voxelCenter(segment->voxels[i]).cast<double>();
+      part.set_num_voxels(part.num_voxels() + 1);
+      auto [b, fresh] = bounds.try_emplace(part.label(), p, p);
+      if (!fresh) {
+        b->second.first = b->second.first.cwiseMin(p);
+        b->second.second = b->second.second.cwiseMax(p);
+      }
+      if (voxels) {
+        for (int k = 0; k < 3; ++k) part.mutable_voxels()->add_points(float(p[k]));
+      }
+    }
+    for (const auto& [label, box] : bounds) {
+      setVector(box.first, part_of[label]->mutable_bounds_object()->mutable_min());
+      setVector(box.second, part_of[label]->mutable_bounds_object()->mutable_max());
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
 
 StatusOr<std::vector<uint64_t>> ObjectDatabaseService::objectsOf(const std::string& session) {
   std::vector<uint64_t> ids;
@@ -92,8 +142,9 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServe
   if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
     return finishUnary(context, allowed);
   }
-  const uint64_t filter = std::hash<std::string>()(request->session_name()) * 2 +
-                          (request->include_merged() ? 1 : 0);
+  const uint64_t filter = std::hash<std::string>()(request->session_name()) * 4 +
+                          (request->include_merged() ? 1 : 0) +
+                          (request->include_structure() ? 2 : 0);
   auto after = parsePageToken(request->page_token(), 'o', filter);
   if (!after.ok()) return finishUnary(context, after.status());
   if (!request->session_name().empty()) {
@@ -112,11 +163,20 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServe
   query.limit = pageSize(request->page_size()) + 1;  // one more: is there a next page?
   query.session = request->session_name();
   query.include_merged = request->include_merged();
+  query.include_structure = request->include_structure();
   auto models = store_->modelSummaries(query);
   if (!models.ok()) return finishUnary(context, models.status());
   const bool more = models->size() == query.limit;
   if (more) models->pop_back();
-  for (const auto& m : *models) toProto(m, response->add_objects());
+  for (const auto& m : *models) {
+    v1::ObjectSummary* summary = response->add_objects();
+    toProto(m, summary);
+    if (!request->include_parts()) continue;
+    if (const Status parts = addParts(*store_, m, false, summary->mutable_parts()); !parts.ok()) {
+      response->Clear();
+      return finishUnary(context, parts);
+    }
+  }
   if (more) response->set_next_page_token(pageToken('o', models->back().id, filter));
   return finishUnary(context, absl::OkStatus());
 }
@@ -178,12 +238,16 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
               response->mutable_mesh());
     }
     if (request->include_cloud()) toProto(model->cloud, response->mutable_cloud());
+    if (request->include_parts()) {
+      OBJDB_RETURN_IF_ERROR(addParts(*store_, summary, true, response->mutable_parts()));
+    }
     const size_t bytes = response->ByteSizeLong();
     if (bytes > options_.max_send_message_bytes) {
       return absl::ResourceExhaustedError(absl::StrFormat(
           "object %d with its %s is %d bytes, above the server's message limit of %d bytes; ask "
-          "for less (include_mesh / include_cloud)",
-          id, request->include_mesh() ? "mesh" : "cloud", bytes, options_.max_send_message_bytes));
+          "for less (include_mesh / include_cloud / include_parts)",
+          id, request->include_mesh() ? "mesh" : request->include_cloud() ? "cloud" : "parts",
+          bytes, options_.max_send_message_bytes));
     }
     return absl::OkStatus();
   };

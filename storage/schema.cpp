@@ -143,6 +143,12 @@ constexpr const char* kSchemaV4 = R"sql(
 ALTER TABLE raw_segments ADD COLUMN parts TEXT NOT NULL DEFAULT '';
 )sql";
 
+// Parts with geometry (issue 18): the part (GSM label) of each of a raw segment's voxels, as an
+// index blob aligned with raw_segments.voxels; NULL when not recorded.
+constexpr const char* kSchemaV5 = R"sql(
+ALTER TABLE raw_segments ADD COLUMN voxel_parts BLOB;
+)sql";
+
 }  // namespace
 
 const std::vector<Migration>& schemaMigrations() {
@@ -151,6 +157,7 @@ const std::vector<Migration>& schemaMigrations() {
       {2, "saved live maps of open sessions", kSchemaV2},
       {3, "room structure: models.structure, raw_segments.observation_depth_m", kSchemaV3},
       {4, "whole objects: raw_segments.parts", kSchemaV4},
+      {5, "parts with geometry: raw_segments.voxel_parts", kSchemaV5},
   };
   return migrations;
 }

@@ -409,7 +409,14 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
   }
   const std::string pose = encodeTransform(segment.T_world_segment);
   const std::string grid = encodeTsdfGrid(*segment.grid, options_.blobs);
+  if (!segment.voxel_parts.empty() && segment.voxel_parts.size() != segment.voxels.size()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "raw segment %s/%d: %d voxel parts for %d voxels", segment.key.session, segment.key.label,
+        segment.voxel_parts.size(), segment.voxels.size()));
+  }
   const std::string voxels = encodeVoxelList(segment.voxels, options_.blobs);
+  const std::string voxel_parts =
+      segment.voxel_parts.empty() ? std::string() : encodeIndices(segment.voxel_parts, options_.blobs);
   std::lock_guard lock(write_mutex_);
   OBJDB_RETURN_IF_ERROR(requireWriter());
   const std::string context =
@@ -424,17 +431,22 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
             *writer_,
             absl::StrFormat(
                 "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
-                "extraction_frame, observation_depth_m, parts, extracted_at) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, %s) "
+                "extraction_frame, observation_depth_m, parts, voxel_parts, extracted_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, %s) "
                 "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
                 "grid = excluded.grid, voxels = excluded.voxels, "
                 "extraction_frame = excluded.extraction_frame, "
                 "observation_depth_m = excluded.observation_depth_m, parts = excluded.parts, "
-                "extracted_at = excluded.extracted_at",
+                "voxel_parts = excluded.voxel_parts, extracted_at = excluded.extracted_at",
                 kNow)));
     s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, pose).bindBlob(4, grid);
     s.bindBlob(5, voxels).bind(6, segment.extraction_frame);
     s.bind(7, double(segment.observation_depth_m)).bind(8, absl::StrJoin(segment.parts, ","));
+    if (segment.voxel_parts.empty()) {
+      s.bindNull(9);
+    } else {
+      s.bindBlob(9, voxel_parts);
+    }
     OBJDB_RETURN_IF_ERROR(s.run());
     return txn.commit();
   };
@@ -448,7 +460,7 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
       Statement s,
       Statement::prepare(*lease,
                          "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame, "
-                         "r.observation_depth_m, r.parts "
+                         "r.observation_depth_m, r.parts, r.voxel_parts "
                          "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
                          "WHERE s.name = ? AND r.label = ?"));
   s.bind(1, key.session).bind(2, int64_t(key.label));
@@ -473,6 +485,16 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
   auto parts = parseParts(s.columnText(6));
   if (!parts.ok()) return inRow(parts.status(), "raw_segments", id, "parts");
   record->parts = std::move(*parts);
+  if (!s.columnIsNull(7)) {
+    auto voxel_parts = decodeIndices(s.columnBlob(7));
+    if (!voxel_parts.ok()) return inRow(voxel_parts.status(), "raw_segments", id, "voxel_parts");
+    if (voxel_parts->size() != record->voxels.size()) {
+      return inRow(absl::DataLossError(absl::StrFormat("%d voxel parts for %d voxels",
+                                                       voxel_parts->size(), record->voxels.size())),
+                   "raw_segments", id, "voxel_parts");
+    }
+    record->voxel_parts = std::move(*voxel_parts);
+  }
   return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
 }
 
@@ -672,6 +694,7 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
   std::string where = query.include_merged ? "m.state IN ('active', 'merged')" : "m.state = 'active'";
+  if (!query.include_structure) where += " AND m.structure = 0";
   if (!query.session.empty()) {
     where += " AND m.id IN (SELECT o.model_id FROM observations o JOIN sessions s ON "
              "s.id = o.session_id WHERE s.name = ?2)";
@@ -1204,6 +1227,7 @@ StatusOr<CheckReport> SqliteStore::check() const {
       {"raw_segments", "pose", [](auto b) { return decodeTransform(b).status(); }},
       {"raw_segments", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
       {"raw_segments", "voxels", [](auto b) { return decodeVoxelList(b).status(); }},
+      {"raw_segments", "voxel_parts", [](auto b) { return decodeIndices(b).status(); }},
       {"merge_records", "transform", [](auto b) { return decodeTransform(b).status(); }},
       {"scene_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
       {"saved_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},

@@ -154,6 +154,7 @@ struct ModelQuery {
   size_t limit = 100;
   std::string session;          // only models observed in this session; empty = all
   bool include_merged = false;  // also models in state "merged"
+  bool include_structure = true;  // false: only models not flagged room structure
 };
 
 struct EncodedModel;  // a model's columns as blobs (sqlite_store.cpp)

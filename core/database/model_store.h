@@ -35,6 +35,7 @@ struct RawSegmentRecord {
   int64_t extraction_frame = 0;
   float observation_depth_m = 0.0f;      // RawSegment::observation_depth_m (0: unknown)
   std::vector<uint32_t> parts;           // RawSegment::parts: the object's GSM labels, sorted
+  std::vector<uint32_t> voxel_parts;     // RawSegment::voxel_parts: each voxel's part (empty: none)
 };
 
 // Evidence of one merge (the numbers the verification produced), persisted with it.

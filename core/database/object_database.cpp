@@ -345,6 +345,7 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   record.extraction_frame = segment.extraction_frame;
   record.observation_depth_m = segment.observation_depth_m;
   record.parts = segment.parts;
+  record.voxel_parts = segment.voxel_parts;
   OBJDB_RETURN_IF_ERROR(store_->putRawSegment(record));
 
   OBJDB_ASSIGN_OR_RETURN(model::ObjectModel incoming,

@@ -372,6 +372,15 @@ void appendBlockVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Keep&& 
   }
 }
 
+// The world voxel index of a segment's voxel (0, 0, 0): its frame is voxel-aligned.
+tsdf::VoxelIndex segmentOrigin(const RawSegment& segment, float voxel_size) {
+  return (segment.T_world_segment.translation() / double(voxel_size))
+      .array()
+      .round()
+      .cast<int>()
+      .matrix();
+}
+
 }  // namespace
 
 RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
@@ -382,7 +391,7 @@ RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
   });
   RawSegment segment{label, Transform::Identity(),
                      tsdf::TsdfLayer::create(layer.voxelSize(), layer.voxelsPerSide()).value(),
-                     {}, last_update_frame, frame, 0.0f, {}};
+                     {}, last_update_frame, frame, 0.0f, {}, {}};
   if (voxels.empty()) return segment;
   Eigen::Vector3i lo = voxels.front();
   for (const auto& v : voxels) lo = lo.cwiseMin(v);
@@ -435,7 +444,13 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
     }
     if (voxels.size() < size_t(std::max(params.min_label_voxels, 1))) continue;
     segments.push_back(extractRawSegment(layer, id, std::move(voxels), margin, frame, frame));
-    segments.back().parts = parts;
+    RawSegment& segment = segments.back();
+    segment.parts = parts;
+    const tsdf::VoxelIndex origin = segmentOrigin(segment, layer.voxelSize());
+    for (const tsdf::VoxelIndex& v : segment.label_voxels) {
+      const tsdf::VoxelIndex w = v + origin;
+      segment.voxel_parts.push_back(labels.at(layer.blockOfVoxel(w))[layer.linearInBlock(w)]);
+    }
   }
   return segments;
 }
@@ -510,6 +525,7 @@ std::vector<RawSegment> Gsm::extractIdleLabels(bool flush) {
                                          info.last_update_frame, frame_));
     segments.back().observation_depth_m = depth;
     segments.back().parts = {label};
+    segments.back().voxel_parts.assign(segments.back().label_voxels.size(), label);
   }
   return segments;
 }
@@ -562,8 +578,11 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     const float depth = observationDepth(voxels, last_update);
     segments.push_back(
         extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_));
-    segments.back().observation_depth_m = depth;
-    segments.back().parts = parts;
+    RawSegment& segment = segments.back();
+    segment.observation_depth_m = depth;
+    segment.parts = parts;
+    const tsdf::VoxelIndex origin = segmentOrigin(segment, layer_.voxelSize());
+    for (const tsdf::VoxelIndex& v : segment.label_voxels) segment.voxel_parts.push_back(mainLabel(v + origin));
   }
   return segments;
 }

@@ -41,6 +41,9 @@ struct RawSegment {
   // The GSM labels the segment is made of (core/gsm/objects.h): a whole object's parts, or just
   // `label` when the GSM extracts labels alone (GsmParams::objects false). Sorted.
   std::vector<Label> parts;
+  // The part (GSM label, one of `parts`) of each of label_voxels, aligned with it; empty when not
+  // recorded (a segment stored before parts had geometry).
+  std::vector<Label> voxel_parts;
 };
 
 struct GsmFrameResult {

@@ -149,7 +149,7 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
     RawSegmentJob job{gsm::RawSegment{label, Transform::Identity(),
                                       tsdf::TsdfLayer::create(map.voxelSize(), map.voxelsPerSide())
                                           .value(),
-                                      {}, 0, 0, 0.0f, {}},
+                                      {}, 0, 0, 0.0f, {}, {}},
                       reason, session.last_index, nullptr, /*withdraw=*/true};  // label only
     jobs.push_back(std::move(job));
   }
@@ -179,6 +179,7 @@ MapCopy copyMap(const gsm::Gsm& map) {
 
 bool sameSegment(const database::RawSegmentRecord& stored, const gsm::RawSegment& segment) {
   if (stored.grid == nullptr || stored.voxels != segment.label_voxels ||
+      stored.parts != segment.parts || stored.voxel_parts != segment.voxel_parts ||
       stored.grid->voxelSize() != segment.grid.voxelSize() ||
       stored.grid->voxelsPerSide() != segment.grid.voxelsPerSide() ||
       stored.grid->numBlocks() != segment.grid.numBlocks() ||

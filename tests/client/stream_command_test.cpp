@@ -87,11 +87,18 @@ TEST(StreamCommand, StreamedSessionsBuildWhatIngestBuildsAndRemoteDescribesThem)
   r = runProcess({kObjdb, "remote", "objects", "--server", address, "--session", "tuesday"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(contains(r.out, "monday, tuesday")) << r.out;  // the merged boxes
+  // With their parts: a line per part of each object at each pose.
+  r = runProcess(
+      {kObjdb, "remote", "objects", "--server", address, "--session", "tuesday", "--parts"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "part ")) << r.out;
+  EXPECT_TRUE(contains(r.out, " voxels, extent ")) << r.out;
   const fs::path cloud = dir / "object.ply";
   r = runProcess({kObjdb, "remote", "object", "--server", address, "--id",
                   std::to_string(served_ids.front()), "--out", cloud.string(), "--what", "cloud"});
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(contains(r.out, "seen in monday")) << r.out;
+  EXPECT_TRUE(contains(r.out, "part ")) << r.out;  // GetObject lists its parts
   EXPECT_GT(fs::file_size(cloud), 1000u);
   const fs::path scene = dir / "scene.ply";
   r = runProcess({kObjdb, "remote", "scene", "--server", address, "--session", "tuesday", "--out",

@@ -66,13 +66,17 @@ std::unique_ptr<v1::ObjectDatabase::Stub> stubFor(const ObjdbServer& server) {
 }
 
 
+// Whole objects by default (ListObjects' default); with `structure`, room structure too.
 std::vector<v1::ObjectSummary> listObjects(v1::ObjectDatabase::Stub& stub,
                                            const std::string& session = "",
-                                           uint32_t page_size = 0) {
+                                           uint32_t page_size = 0, bool structure = false,
+                                           bool parts = false) {
   std::vector<v1::ObjectSummary> out;
   v1::ListObjectsRequest request;
   request.set_session_name(session);
   request.set_page_size(page_size);
+  request.set_include_structure(structure);
+  request.set_include_parts(parts);
   while (true) {
     grpc::ClientContext context;
     setDeadline(&context);
@@ -227,9 +231,33 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
   database::InMemoryModelStore offline_store;
   const auto offline = offlineModels("monday", kFrames, &offline_store);
   ASSERT_FALSE(offline.empty());
-  const auto objects = listObjects(*stub);
+  const auto objects = listObjects(*stub, "", 0, /*structure=*/true);
   ASSERT_EQ(objects.size(), offline.size());
   ASSERT_EQ(size_t(ended.summary().object_ids_size()), offline.size());
+  // By default the listing holds the whole objects only: room structure is left out.
+  {
+    std::vector<uint64_t> whole, listed;
+    for (const auto& m : offline) {
+      if (!m->structure) whole.push_back(uint64_t(m->id));
+    }
+    ASSERT_LT(whole.size(), offline.size()) << "the scene has room structure";
+    for (const auto& o : listObjects(*stub)) {
+      EXPECT_FALSE(o.structure());
+      listed.push_back(o.id());
+    }
+    EXPECT_EQ(listed, whole);
+    // Asked for parts, each object lists them per pose, with their voxel counts but not the
+    // voxels themselves.
+    for (const auto& o : listObjects(*stub, "", 0, /*structure=*/false, /*parts=*/true)) {
+      ASSERT_GT(o.parts_size(), 0) << "object " << o.id();
+      for (const auto& part : o.parts()) {
+        EXPECT_EQ(part.session_name(), "monday");
+        EXPECT_GT(part.num_voxels(), 0u);
+        EXPECT_EQ(part.voxels().points_size(), 0);
+        EXPECT_LE(part.bounds_object().min().x(), part.bounds_object().max().x());
+      }
+    }
+  }
   for (size_t i = 0; i < objects.size(); ++i) {
     EXPECT_EQ(objects[i].num_poses(), offline[i]->observations.size()) << i;
     EXPECT_EQ(objects[i].planar(), offline[i]->planar) << i;
@@ -238,7 +266,7 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
     EXPECT_EQ(objects[i].state(), v1::OBJECT_STATE_ACTIVE);
   }
   // Paging walks the same objects one by one.
-  const auto paged = listObjects(*stub, "monday", 1);
+  const auto paged = listObjects(*stub, "monday", 1, /*structure=*/true);
   ASSERT_EQ(paged.size(), objects.size());
   for (size_t i = 0; i < paged.size(); ++i) EXPECT_EQ(paged[i].id(), objects[i].id());
 
@@ -250,6 +278,7 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
     request.set_id(objects.front().id());
     request.set_include_mesh(true);
     request.set_include_cloud(true);
+    request.set_include_parts(true);
     v1::ObjectDetail detail;
     const grpc::Status status = stub->GetObject(&context, request, &detail);
     ASSERT_TRUE(status.ok()) << status.error_message();
@@ -260,6 +289,27 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
     // The pose names the parts of the segment that observed it, as stored with it.
     ASSERT_GT(detail.poses(0).parts_size(), 0);
     EXPECT_EQ(detail.poses(0).parts(0), offline.front()->observations.front().label);
+    // Its parts: one per label of each pose, together holding the segment's voxels, which lie
+    // on the object in its base frame (within the model's bounds and a truncation margin).
+    const auto segment =
+        offline_store.rawSegment({"monday", offline.front()->observations.front().label}).value();
+    int part_entries = 0;
+    for (const auto& pose : detail.poses()) part_entries += pose.parts_size();
+    ASSERT_EQ(detail.parts_size(), part_entries);
+    uint32_t voxels = 0;
+    const auto& box = detail.summary().bounds_object();
+    for (const auto& part : detail.parts()) {
+      if (part.segment_id() != detail.poses(0).segment_id()) continue;
+      voxels += part.num_voxels();
+      EXPECT_EQ(size_t(part.voxels().points_size()), 3 * size_t(part.num_voxels()));
+      for (int i = 0; i + 2 < part.voxels().points_size(); i += 3) {
+        EXPECT_GT(part.voxels().points(i), box.min().x() - 0.08);
+        EXPECT_LT(part.voxels().points(i), box.max().x() + 0.08);
+        EXPECT_GT(part.voxels().points(i + 2), box.min().z() - 0.08);
+        EXPECT_LT(part.voxels().points(i + 2), box.max().z() + 0.08);
+      }
+    }
+    EXPECT_EQ(voxels, segment->voxels.size());
     EXPECT_EQ(size_t(detail.cloud().points_size()), 3 * offline.front()->cloud.points.size());
     EXPECT_EQ(detail.stats().num_points(), offline.front()->cloud.points.size());
     EXPECT_GT(detail.mesh().triangles_size(), 0);
@@ -312,7 +362,7 @@ TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAn
   server = startOrDie(loopbackOptions(db_path));
   ASSERT_NE(server, nullptr);
   stub = stubFor(*server);
-  EXPECT_EQ(listObjects(*stub).size(), offline.size());
+  EXPECT_EQ(listObjects(*stub, "", 0, /*structure=*/true).size(), offline.size());
   grpc::ClientContext context;
   setDeadline(&context);
   v1::ListSessionsResponse sessions;
@@ -650,7 +700,7 @@ TEST(ObjectDatabaseService, AFailingDiskFailsEndSessionAndNothingIsLostOnceTheDi
     ASSERT_TRUE(ingest(*stub, session("monday", kFrames)).status.ok());
     v1::EndSessionResponse ended;
     ASSERT_TRUE(endSession(*stub, "monday", &ended).ok());
-    expected = listObjects(*stub);
+    expected = listObjects(*stub, "", 0, /*structure=*/true);
   }
   ASSERT_GE(expected.size(), 2u);
 
@@ -679,7 +729,7 @@ TEST(ObjectDatabaseService, AFailingDiskFailsEndSessionAndNothingIsLostOnceTheDi
   ASSERT_TRUE(end.ok()) << end.error_message();
   EXPECT_EQ(ended.summary().state(), v1::SESSION_STATE_ENDED);
   EXPECT_EQ(ended.summary().counters().frames_integrated(), kFrames);
-  const auto objects = listObjects(*stub);
+  const auto objects = listObjects(*stub, "", 0, /*structure=*/true);
   ASSERT_EQ(objects.size(), expected.size());
   for (size_t i = 0; i < objects.size(); ++i) {
     EXPECT_EQ(objects[i].num_poses(), expected[i].num_poses()) << i;
@@ -786,7 +836,7 @@ TEST(ObjectDatabaseService, ASessionLeftOpenByACrashIsEndedFromItsSavedMapAtTheN
   EXPECT_NE(end.error_message().find("saved after 24 frames"), std::string::npos)
       << end.error_message();
 
-  const auto objects = listObjects(*stub);
+  const auto objects = listObjects(*stub, "", 0, /*structure=*/true);
   ASSERT_EQ(objects.size(), offline.size());
   for (size_t i = 0; i < objects.size(); ++i) {
     EXPECT_EQ(objects[i].id(), uint64_t(offline[i]->id)) << i;
@@ -809,7 +859,7 @@ TEST(ObjectDatabaseService, ASessionLeftOpenByACrashIsEndedFromItsSavedMapAtTheN
   server = startOrDie(loopbackOptions(db_path));
   ASSERT_NE(server, nullptr);
   stub = stubFor(*server);
-  EXPECT_EQ(listObjects(*stub).size(), offline.size());
+  EXPECT_EQ(listObjects(*stub, "", 0, /*structure=*/true).size(), offline.size());
   end = endSession(*stub, "monday", &ended);
   EXPECT_EQ(end.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << end.error_message();
 }

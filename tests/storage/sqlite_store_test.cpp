@@ -165,6 +165,7 @@ TEST(SqliteStore, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   auto store = openStore(dir / "db.sqlite");
   auto first = makeRawSegment("monday", 4, 1);
   first.parts = {4, 9, 12};  // a whole object of three GSM labels
+  for (size_t i = 0; i < first.voxels.size(); ++i) first.voxel_parts.push_back(first.parts[i % 3]);
   ASSERT_TRUE(store->putRawSegment(first).ok());
   auto loaded = store->rawSegment({"monday", 4});
   ASSERT_TRUE(loaded.ok()) << loaded.status();
@@ -173,12 +174,22 @@ TEST(SqliteStore, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   EXPECT_EQ((*loaded)->voxels, first.voxels);
   EXPECT_EQ((*loaded)->extraction_frame, first.extraction_frame);
   EXPECT_EQ((*loaded)->parts, first.parts);
+  EXPECT_EQ((*loaded)->voxel_parts, first.voxel_parts);
+  // Voxel parts must match the voxels one to one.
+  auto uneven = makeRawSegment("monday", 5, 1);
+  uneven.voxel_parts = {5};
+  ASSERT_GT(uneven.voxels.size(), 1u);
+  const Status refused = store->putRawSegment(uneven);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(std::string(refused.message()).find("1 voxel parts for"), std::string::npos)
+      << refused.message();
 
   auto again = makeRawSegment("monday", 4, 2);
   again.parts = {4};
   ASSERT_TRUE(store->putRawSegment(again).ok());
   EXPECT_EQ(store->rawSegment({"monday", 4}).value()->voxels, again.voxels);
   EXPECT_EQ(store->rawSegment({"monday", 4}).value()->parts, again.parts);
+  EXPECT_TRUE(store->rawSegment({"monday", 4}).value()->voxel_parts.empty()) << "none recorded";
   const StoreStats stats = store->stats().value();
   for (const auto& t : stats.tables) {
     if (t.table == "raw_segments") {
@@ -574,7 +585,9 @@ TEST(SqliteStore, AFileOfTheFirstSchemaIsMigratedToTheCurrentOne) {
   segment.voxels = {tsdf::VoxelIndex(1, 2, 3)};
   segment.observation_depth_m = 2.75f;
   segment.parts = {4, 7};
+  segment.voxel_parts = {7};
   ASSERT_TRUE((*store)->putRawSegment(segment).ok());
+  EXPECT_EQ((*store)->rawSegment({"s", 4}).value()->voxel_parts, (std::vector<uint32_t>{7}));
   EXPECT_FLOAT_EQ((*store)->rawSegment({"s", 4}).value()->observation_depth_m, 2.75f);
   EXPECT_EQ((*store)->rawSegment({"s", 4}).value()->parts, (std::vector<uint32_t>{4, 7}));
   const model::ObjectModel source = makeStoreModel(1, 2);

@@ -207,6 +207,12 @@ TEST(Objects, AnObjectKeepsItsGroupingInASecondSessionAndFromTheSavedMap) {
     if (session == 0) parts_first = chair->parts.size();
     EXPECT_EQ(chair->parts.size(), 6u);
     EXPECT_EQ(chair->parts.size(), parts_first);
+    // Every voxel names its part, and every part has voxels.
+    ASSERT_EQ(chair->voxel_parts.size(), chair->label_voxels.size());
+    std::map<Label, size_t> voxels_of;
+    for (const Label part : chair->voxel_parts) ++voxels_of[part];
+    ASSERT_EQ(voxels_of.size(), chair->parts.size());
+    for (const Label part : chair->parts) EXPECT_GT(voxels_of[part], 0u) << "part " << part;
     // From the saved map (a restart ends the session from it): the same object, the same parts.
     const auto from_saved = extractLabelled(gsm.tsdf(), gsm.mainLabelBlocks(), GsmParams{},
                                             int(std::ceil(TsdfParams().truncation_voxels)),
@@ -217,6 +223,7 @@ TEST(Objects, AnObjectKeepsItsGroupingInASecondSessionAndFromTheSavedMap) {
       found = true;
       EXPECT_EQ(s.parts, chair->parts);
       EXPECT_EQ(s.label_voxels, chair->label_voxels);
+      EXPECT_EQ(s.voxel_parts, chair->voxel_parts);
     }
     EXPECT_TRUE(found);
   }
