@@ -372,20 +372,12 @@ void appendBlockVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Keep&& 
   }
 }
 
-// The world voxel index of a segment's voxel (0, 0, 0): its frame is voxel-aligned.
-tsdf::VoxelIndex segmentOrigin(const RawSegment& segment, float voxel_size) {
-  return (segment.T_world_segment.translation() / double(voxel_size))
-      .array()
-      .round()
-      .cast<int>()
-      .matrix();
-}
-
 }  // namespace
 
 RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
                              std::vector<tsdf::VoxelIndex> voxels, int margin,
-                             int64_t last_update_frame, int64_t frame) {
+                             int64_t last_update_frame, int64_t frame,
+                             const std::function<Label(const tsdf::VoxelIndex&)>& part_of) {
   std::sort(voxels.begin(), voxels.end(), [](const auto& a, const auto& b) {
     return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
   });
@@ -399,6 +391,7 @@ RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
   segment.T_world_segment.translation() = origin.cast<double>() * double(layer.voxelSize());
   for (const auto& v : voxels) {
     segment.label_voxels.push_back(v - origin);
+    segment.voxel_parts.push_back(part_of ? part_of(v) : label);
     for (int dz = -margin; dz <= margin; ++dz) {
       for (int dy = -margin; dy <= margin; ++dy) {
         for (int dx = -margin; dx <= margin; ++dx) {
@@ -443,14 +436,11 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
       }
     }
     if (voxels.size() < size_t(std::max(params.min_label_voxels, 1))) continue;
-    segments.push_back(extractRawSegment(layer, id, std::move(voxels), margin, frame, frame));
-    RawSegment& segment = segments.back();
-    segment.parts = parts;
-    const tsdf::VoxelIndex origin = segmentOrigin(segment, layer.voxelSize());
-    for (const tsdf::VoxelIndex& v : segment.label_voxels) {
-      const tsdf::VoxelIndex w = v + origin;
-      segment.voxel_parts.push_back(labels.at(layer.blockOfVoxel(w))[layer.linearInBlock(w)]);
-    }
+    segments.push_back(extractRawSegment(
+        layer, id, std::move(voxels), margin, frame, frame, [&](const tsdf::VoxelIndex& v) {
+          return labels.at(layer.blockOfVoxel(v))[layer.linearInBlock(v)];
+        }));
+    segments.back().parts = parts;
   }
   return segments;
 }
@@ -525,7 +515,6 @@ std::vector<RawSegment> Gsm::extractIdleLabels(bool flush) {
                                          info.last_update_frame, frame_));
     segments.back().observation_depth_m = depth;
     segments.back().parts = {label};
-    segments.back().voxel_parts.assign(segments.back().label_voxels.size(), label);
   }
   return segments;
 }
@@ -577,12 +566,10 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     extracted_objects_[id] = ExtractedObject{parts, frame_};
     const float depth = observationDepth(voxels, last_update);
     segments.push_back(
-        extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_));
-    RawSegment& segment = segments.back();
-    segment.observation_depth_m = depth;
-    segment.parts = parts;
-    const tsdf::VoxelIndex origin = segmentOrigin(segment, layer_.voxelSize());
-    for (const tsdf::VoxelIndex& v : segment.label_voxels) segment.voxel_parts.push_back(mainLabel(v + origin));
+        extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_,
+                          [this](const tsdf::VoxelIndex& v) { return mainLabel(v); }));
+    segments.back().observation_depth_m = depth;
+    segments.back().parts = parts;
   }
   return segments;
 }

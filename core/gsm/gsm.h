@@ -6,6 +6,8 @@
 // a while are extracted as raw segments for the object database.
 #pragma once
 
+#include <functional>
+
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -71,10 +73,12 @@ struct LabelInfo {
 // block, in the block's voxel order: the labels of a scene map as the store keeps them.
 
 // The raw segment of `label` made of `voxels` (map voxel indices): their TSDF plus `margin`
-// voxels around them, in the segment frame (see RawSegment).
+// voxels around them, in the segment frame (see RawSegment). `part_of` gives the part (GSM label)
+// of a map voxel, for RawSegment::voxel_parts; without it every voxel is of `label`.
 RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
                              std::vector<tsdf::VoxelIndex> voxels, int margin,
-                             int64_t last_update_frame, int64_t frame);
+                             int64_t last_update_frame, int64_t frame,
+                             const std::function<Label(const tsdf::VoxelIndex&)>& part_of = {});
 
 // Every object (params.objects) or label of a stored map (its TSDF and main labels) with at
 // least params.min_label_voxels voxels as a raw segment, in id order, as the GSM would extract
