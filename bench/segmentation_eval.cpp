@@ -142,7 +142,7 @@ RunResult run(const std::vector<Sample>& samples, const Intrinsics& k, int threa
       k.pixels += double(score.pixels);
     }
     auto& t = r.timings;
-    t.points_ms += result.timings.points_ms;
+    t.points_ms += result.timings.filter_ms + result.timings.points_ms;
     t.discontinuity_ms += result.timings.discontinuity_ms;
     t.normals_ms += result.timings.normals_ms;
     t.convexity_ms += result.timings.convexity_ms;

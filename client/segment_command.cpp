@@ -253,7 +253,7 @@ int runSegmentCommand(int argc, char** argv) {
   std::printf(
       "timings (ms): load %.1f | points %.1f  discontinuities %.1f  normals %.1f  "
       "convexity %.1f  labels %.1f  segments %.1f  = segmentation %.1f | write %.1f\n",
-      load_ms, t.points_ms, t.discontinuity_ms, t.normals_ms, t.convexity_ms, t.labels_ms,
+      load_ms, t.filter_ms + t.points_ms, t.discontinuity_ms, t.normals_ms, t.convexity_ms, t.labels_ms,
       t.segments_ms, t.total_ms, write_ms);
   std::printf(
       "pixels: %zu invalid, %zu boundary (%.1f %% / %.1f %%); %zu regions below %d px "

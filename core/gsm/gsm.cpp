@@ -1,6 +1,7 @@
 #include "core/gsm/gsm.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <tuple>
@@ -195,8 +196,15 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
         depth.width, depth.height));
   }
   GsmFrameResult result;
+  using Clock = std::chrono::steady_clock;
+  const auto ms = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  const auto t_start = Clock::now();
   // Geometry first: it validates the frame and pose and changes nothing when they are bad.
   OBJDB_ASSIGN_OR_RETURN(result.tsdf, integrator_.integrate(depth, T_world_camera, &layer_, color));
+  const auto t_integrated = Clock::now();
+  result.timings.integration_ms = ms(t_start, t_integrated);
 
   const Eigen::Isometry3f T = T_world_camera.cast<float>();
   const Intrinsics& k = intrinsics_;
@@ -301,6 +309,8 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
     }
   }
   for (Label& l : result.segment_labels) l = l ? resolve(l) : 0;
+  const auto t_associated = Clock::now();
+  result.timings.association_ms = ms(t_integrated, t_associated);
 
   // One vote per voxel per frame, for the segment with most points in it. Per block, the
   // labels voted for are gathered first so their bookkeeping is updated once per block.
@@ -354,6 +364,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
   }
   camera_positions_.push_back(T_world_camera.translation().cast<float>());
   ++frame_;
+  result.timings.voting_ms = ms(t_associated, Clock::now());
   return result;
 }
 

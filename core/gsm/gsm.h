@@ -48,8 +48,16 @@ struct RawSegment {
   std::vector<Label> voxel_parts;
 };
 
+// Milliseconds spent per step of Gsm::integrate.
+struct GsmTimings {
+  double integration_ms = 0;  // TSDF (and carving)
+  double association_ms = 0;  // points into voxels, segment × label overlaps, label choice, merges
+  double voting_ms = 0;       // the per-voxel label votes
+};
+
 struct GsmFrameResult {
   tsdf::IntegrationStats tsdf;
+  GsmTimings timings;
   std::vector<Label> segment_labels;  // global label of each frame segment (index = label − 1)
   size_t new_labels = 0;
   size_t merges = 0;

@@ -552,6 +552,8 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
     fillDepthHoles(&depth_, params_.fill_holes_iterations, params_.discontinuity_threshold);
   }
   for (float d : depth_.data) result.invalid_pixels += d > 0.0f ? 0 : 1;
+  result.timings.filter_ms = msSince(t);
+  t = Clock::now();
   depthToPoints(depth_, intrinsics_, &points_);
   result.timings.points_ms = msSince(t);
 

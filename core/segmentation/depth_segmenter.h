@@ -79,7 +79,7 @@ struct Segment {
 };
 
 struct SegmentationTimings {
-  double points_ms = 0, discontinuity_ms = 0, normals_ms = 0, convexity_ms = 0, labels_ms = 0,
+  double filter_ms = 0, points_ms = 0, discontinuity_ms = 0, normals_ms = 0, convexity_ms = 0, labels_ms = 0,
          segments_ms = 0, total_ms = 0;
 };
 
