@@ -4,8 +4,7 @@
 
 namespace objdb::server {
 
-JobQueue::JobQueue(size_t capacity)
-    : capacity_(capacity == 0 ? 1 : capacity), thread_([this] { run(); }) {}
+JobQueue::JobQueue() : thread_([this] { run(); }) {}
 
 JobQueue::~JobQueue() {
   {
@@ -14,13 +13,6 @@ JobQueue::~JobQueue() {
   }
   changed_.notify_all();
   thread_.join();
-}
-
-void JobQueue::pushWaiting(std::function<void()> job) {
-  std::unique_lock lock(mutex_);
-  changed_.wait(lock, [this] { return jobs_.size() < capacity_; });
-  jobs_.push_back(std::move(job));
-  changed_.notify_all();
 }
 
 void JobQueue::push(std::function<void()> job) {
@@ -45,7 +37,6 @@ void JobQueue::run() {
       jobs_.pop_front();
       running_job_ = true;
     }
-    changed_.notify_all();  // room for a waiting producer
     job();
     std::lock_guard lock(mutex_);
     running_job_ = false;

@@ -1,7 +1,7 @@
 // One worker thread running jobs in the order they were queued: the server's object database
 // (Algorithm 1 is one writer's sequence of inserts) runs on one, so gRPC threads never wait for
-// matching. A queue with a capacity makes producers that may wait (a session's frame worker)
-// feel backpressure; callers that must not wait (gRPC threads) queue past it.
+// matching. No producer ever waits on it: a session's frame worker looks at pending() and puts
+// extraction off while the database is behind (ObjectDatabaseService::processFrame).
 #pragma once
 
 #include <condition_variable>
@@ -15,14 +15,12 @@ namespace objdb::server {
 
 class JobQueue {
  public:
-  explicit JobQueue(size_t capacity);
+  JobQueue();
   // Runs every queued job, then stops the thread.
   ~JobQueue();
   JobQueue(const JobQueue&) = delete;
   JobQueue& operator=(const JobQueue&) = delete;
 
-  // Waits while `capacity` jobs are queued (backpressure), then queues the job.
-  void pushWaiting(std::function<void()> job);
   // Queues the job at once, whatever the queue holds.
   void push(std::function<void()> job);
   // Jobs queued or running.
@@ -31,7 +29,6 @@ class JobQueue {
  private:
   void run();
 
-  const size_t capacity_;
   mutable std::mutex mutex_;
   std::condition_variable changed_;
   std::deque<std::function<void()>> jobs_;

@@ -1,6 +1,11 @@
 #include "server/object_database_service.h"
 
 #include <algorithm>
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
+#include <thread>
 #include <cmath>
 #include <future>
 #include <utility>
@@ -52,7 +57,7 @@ ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
     : options_(options),
       store_(store),
       db_(std::move(db)),
-      database_queue_(std::make_unique<JobQueue>(options.segment_queue)) {
+      database_queue_(std::make_unique<JobQueue>()) {
   if (options_.auto_end_after.count() > 0) janitor_ = std::thread([this] { endIdleSessions(); });
 }
 
@@ -243,6 +248,51 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
     stream->session = *opened;
   }
   LiveSession& session = **opened;
+  // Two stages, one frame apart: the segmentation thread decodes and segments frame k+1 while
+  // this thread fuses frame k (and extracts, and hands segments to the database's thread).
+  // Frames stay in order: one producer, one consumer, a queue of kSegmentedAhead.
+  constexpr size_t kSegmentedAhead = 1;
+  struct Segmented {
+    v1::Frame frame;
+    PreparedFrame prepared;
+  };
+  std::mutex ahead_mutex;
+  std::condition_variable ahead_changed;
+  std::deque<Segmented> ahead;
+  bool segmenter_done = false, input_complete = false;
+  std::atomic<bool> stop_segmenting{false};
+  std::thread segmenter([&] {
+    bool complete = false;
+    while (true) {
+      v1::Frame frame;
+      {
+        std::unique_lock lock(stream->mutex);
+        stream->changed.wait(lock, [&] {
+          return stream->cancelled || stop_segmenting || !stream->inbox.empty() ||
+                 stream->input_ended;
+        });
+        if (stream->cancelled || stop_segmenting) break;
+        if (stream->inbox.empty()) {
+          complete = true;
+          break;
+        }
+        frame = std::move(stream->inbox.front());
+        stream->inbox.pop_front();
+        stream->resumeReading();
+      }
+      Segmented item{std::move(frame), {}};
+      item.prepared = prepareFrame(*session.segmenter, session.intrinsics, item.frame);
+      std::unique_lock lock(ahead_mutex);
+      ahead_changed.wait(lock, [&] { return stop_segmenting || ahead.size() < kSegmentedAhead; });
+      if (stop_segmenting) break;
+      ahead.push_back(std::move(item));
+      ahead_changed.notify_all();
+    }
+    std::lock_guard lock(ahead_mutex);
+    segmenter_done = true;
+    input_complete = complete;
+    ahead_changed.notify_all();
+  });
   bool ended_cleanly = false;
   while (true) {
     // Backpressure from a client that does not read: no more frames until it does.
@@ -250,23 +300,35 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
                                session.name)) {
       break;
     }
-    v1::Frame frame;
+    Segmented item;
     {
-      std::unique_lock lock(stream->mutex);
-      stream->changed.wait(lock, [&] {
-        return stream->cancelled || !stream->inbox.empty() || stream->input_ended;
-      });
-      if (stream->cancelled) break;
-      if (stream->inbox.empty()) {
-        ended_cleanly = true;
+      std::unique_lock lock(ahead_mutex);
+      ahead_changed.wait(lock, [&] { return !ahead.empty() || segmenter_done; });
+      if (ahead.empty()) {
+        ended_cleanly = input_complete;
         break;
       }
-      frame = std::move(stream->inbox.front());
-      stream->inbox.pop_front();
-      stream->resumeReading();
+      item = std::move(ahead.front());
+      ahead.pop_front();
+      ahead_changed.notify_all();
     }
-    processFrame(stream, frame);
+    {
+      std::lock_guard lock(stream->mutex);
+      if (stream->cancelled) break;
+    }
+    processFrame(stream, item.frame, item.prepared);
   }
+  // The segmentation thread stops too (it may wait for frames, or for room ahead).
+  stop_segmenting = true;
+  {
+    std::lock_guard lock(ahead_mutex);
+    ahead_changed.notify_all();
+  }
+  {
+    std::lock_guard lock(stream->mutex);
+    stream->changed.notify_all();
+  }
+  segmenter.join();
   if (ended_cleanly) {
     // Every segment extracted so far through the database, then the summary.
     std::promise<void> done;
@@ -318,7 +380,7 @@ void ObjectDatabaseService::endStreaming(const std::shared_ptr<LiveSession>& ses
 }
 
 void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& stream_ptr,
-                                         const v1::Frame& frame) {
+                                         const v1::Frame& frame, const PreparedFrame& prepared) {
   IngestStream& stream = *stream_ptr;
   LiveSession& session = *stream.session;
   v1::IngestResponse response;
@@ -337,7 +399,7 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
     *ack.mutable_session() = session.counters;
   };
   auto run = [&]() -> Status {
-    OBJDB_RETURN_IF_ERROR(integrateFrame(session, frame, &ack));
+    OBJDB_RETURN_IF_ERROR(integrateFrame(session, frame, prepared, &ack));
     std::lock_guard lock(session.mutex);
     session.counters.set_frames_integrated(session.counters.frames_integrated() + 1);
     *ack.mutable_session() = session.counters;
@@ -347,8 +409,16 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
   const bool accepted = ack.accepted();
   stream.send(std::move(response));  // moves the ack away
   if (!accepted) return;
-  std::vector<RawSegmentJob> jobs = extractSegments(session, false, v1::SegmentExtracted::IDLE);
-  if (!jobs.empty()) queueInserts(stream_ptr->session, stream_ptr, std::move(jobs), true);
+  // Overload policy: the frame path never waits for the database. While segment_queue jobs
+  // wait for it, idle segments are not extracted after this frame: they stay in the map (still
+  // fused, still voted on) and are extracted after a later frame once the database has caught
+  // up, or at the session's flush. Nothing is lost; segments reach the database later.
+  if (database_queue_->pending() < options_.segment_queue) {
+    std::vector<RawSegmentJob> jobs = extractSegments(session, false, v1::SegmentExtracted::IDLE);
+    if (!jobs.empty()) queueInserts(stream_ptr->session, stream_ptr, std::move(jobs));
+  } else {
+    extractions_deferred_.fetch_add(1);
+  }
   maybeSaveMap(stream_ptr->session);
 }
 
@@ -362,8 +432,8 @@ void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& ses
   if (now - session->map_saved_at < options_.save_map_every || session->map_save_pending) return;
   session->map_saved_at = now;
   session->map_save_pending = true;
-  // Behind the inserts queued before it (waiting when the queue is full, like them).
-  database_queue_->pushWaiting(
+  // Behind the inserts queued before it; never waiting (one save at a time is pending).
+  database_queue_->push(
       [this, session, copy = copyMap(*session->map)] { writeSavedMap(session, copy); });
 }
 
@@ -399,15 +469,11 @@ void ObjectDatabaseService::writeSavedMap(const std::shared_ptr<LiveSession>& se
 
 void ObjectDatabaseService::queueInserts(const std::shared_ptr<LiveSession>& session,
                                          const std::shared_ptr<IngestStream>& stream,
-                                         std::vector<RawSegmentJob> jobs, bool may_wait) {
+                                         std::vector<RawSegmentJob> jobs) {
   for (auto& job : jobs) {
     auto shared = std::make_shared<RawSegmentJob>(std::move(job));
     auto work = [this, session, stream, shared] { (void)insert(*session, stream.get(), *shared); };
-    if (may_wait) {
-      database_queue_->pushWaiting(std::move(work));
-    } else {
-      database_queue_->push(std::move(work));
-    }
+    database_queue_->push(std::move(work));
   }
 }
 

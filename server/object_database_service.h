@@ -4,9 +4,11 @@
 // and the RPC handlers (queries in queries.cpp, recovery at start in session_recovery.cpp).
 //
 // - Ingest: one stream = one session. The header is checked (name, intrinsics, parameters; the
-//   database's model settings must stay the same) and the session stored as open; a frame worker
-//   thread per stream decodes and validates each frame, segments it, fuses it into the session's
-//   Global Segmentation Map and acks it; idle segments go to the database queue. At most
+//   database's model settings must stay the same) and the session stored as open; per stream, a
+//   segmentation thread decodes and segments each frame, one frame ahead of the frame worker,
+//   which validates it, fuses it into the session's Global Segmentation Map and acks it; idle
+//   segments go to the database queue (extraction is put off while the queue is full, so the
+//   database never stalls the frames). At most
 //   `frame_queue` frames wait per stream: beyond that the server stops reading (the client's
 //   writes block) — backpressure.
 // - One database thread runs Algorithm 1 for every extracted segment, in extraction order, and
@@ -47,6 +49,7 @@ struct LiveSession;
 struct IngestStream;
 struct RawSegmentJob;
 struct MapCopy;
+struct PreparedFrame;
 
 struct ServiceOptions {
   Params params;                    // the server's parameters; sessions may override some
@@ -64,7 +67,7 @@ struct ServiceOptions {
   // RESOURCE_EXHAUSTED and the session is kept (INTERRUPTED), as after a broken stream.
   size_t max_pending_events = 64;
   std::chrono::milliseconds slow_reader_timeout{60 * 1000};
-  size_t segment_queue = 64;        // segments waiting for the database before frame work waits
+  size_t segment_queue = 64;        // segments waiting for the database before extraction is put off
   int integration_threads = 2;      // TSDF integration threads per session
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size
   size_t max_send_message_bytes = 16 << 20;    // GetObject larger than this: RESOURCE_EXHAUSTED
@@ -129,7 +132,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // The frame worker is done with the session's map: hands EndSession jobs that waited for it to
   // the database queue; an interrupted session is stored as such (on the database thread).
   void endStreaming(const std::shared_ptr<LiveSession>& session, bool interrupted);
-  void processFrame(const std::shared_ptr<IngestStream>& stream, const v1::Frame& frame);
+  // Fuses one segmented frame (integrateFrame), acks it, extracts idle segments for the
+  // database and saves the map when due (the frame worker's thread).
+  void processFrame(const std::shared_ptr<IngestStream>& stream, const v1::Frame& frame,
+                    const PreparedFrame& prepared);
   // Every save_map_every (frame worker): a copy of the map to the database thread, which saves
   // it; skipped while the previous save is still waiting.
   void maybeSaveMap(const std::shared_ptr<LiveSession>& session);
@@ -149,11 +155,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   static Status recoveryFailed(const std::string& name, int64_t saved_frames);
   // UNAVAILABLE while the session `name` is being ended from its saved map.
   Status checkNotRecovering(const std::string& name);
-  // Queues the database insert of each segment (frame workers wait when the queue is full; they
-  // insert what they extracted even when their stream was cancelled: nothing extracted is lost).
+  // Queues the database insert of each segment, never waiting (frame workers insert what they
+  // extracted even when their stream was cancelled: nothing extracted is lost).
   void queueInserts(const std::shared_ptr<LiveSession>& session,
-                    const std::shared_ptr<IngestStream>& stream, std::vector<RawSegmentJob> jobs,
-                    bool may_wait);
+                    const std::shared_ptr<IngestStream>& stream, std::vector<RawSegmentJob> jobs);
   // Algorithm 1 for one segment (database thread); events go to `stream` when given. Errors:
   // storage failures (a segment the database cannot take is skipped, OK).
   Status insert(LiveSession& session, IngestStream* stream, RawSegmentJob& job);
@@ -194,6 +199,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::atomic<uint64_t> candidates_rejected_by_scene_{0};
   std::atomic<uint64_t> poses_without_scene_{0};
   std::atomic<uint64_t> merges_same_place_{0};
+  std::atomic<uint64_t> extractions_deferred_{0};
   // Insert time by stage since start (GetStats insert_timings).
   std::mutex timings_mutex_;
   database::InsertTimings insert_timings_;

@@ -404,6 +404,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
     response->set_candidates_rejected_by_scene(candidates_rejected_by_scene_.load());
     response->set_poses_without_scene(poses_without_scene_.load());
     response->set_merges_same_place(merges_same_place_.load());
+    response->set_extractions_deferred(extractions_deferred_.load());
     {
       std::lock_guard lock(timings_mutex_);
       const database::InsertTimings& t = insert_timings_;

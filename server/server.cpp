@@ -65,6 +65,10 @@ Status ServerOptions::validate() const {
         absl::StrFormat("slow_reader_timeout is %d ms, must be in [1 ms, one day]",
                         static_cast<int64_t>(slow_reader_timeout.count())));
   }
+  if (segment_queue < 0 || segment_queue > 100000) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("segment_queue is %d segments, must be in [0, 100000]", segment_queue));
+  }
   if (frame_queue < 1 || frame_queue > 1024) {
     return absl::InvalidArgumentError(
         absl::StrFormat("frame_queue is %d frames, must be in [1, 1024]", frame_queue));
@@ -89,6 +93,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
           {options.tls_cert_file, options.tls_key_file, options.tls_client_ca_file}));
   service_options.params = options.params;
   service_options.frame_queue = size_t(options.frame_queue);
+  service_options.segment_queue = size_t(options.segment_queue);
   service_options.max_open_sessions = size_t(options.max_open_sessions);
   service_options.auto_end_after = options.auto_end_after;
   service_options.save_map_every = options.save_map_every;

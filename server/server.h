@@ -54,6 +54,9 @@ struct ServerOptions {
   Params params;
   // Frames buffered per Ingest stream before the server stops reading it (backpressure).
   int frame_queue = 8;
+  // Segments waiting for the database beyond which frame workers put extraction off (the
+  // database never stalls frames); 0: nothing is extracted while streaming, all at EndSession.
+  int segment_queue = 64;
   // A client that does not read its Ingest stream: at max_pending_events unread events (acks,
   // segment and object events) the server stops taking its frames, so its writes block; after
   // slow_reader_timeout with none of them read, the stream ends with RESOURCE_EXHAUSTED (the

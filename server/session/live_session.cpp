@@ -89,7 +89,28 @@ Status startPipeline(LiveSession& session, int integration_threads) {
   return absl::OkStatus();
 }
 
-Status integrateFrame(LiveSession& session, const v1::Frame& frame, v1::FrameAck* ack) {
+PreparedFrame prepareFrame(segmentation::DepthSegmenter& segmenter, const Intrinsics& intrinsics,
+                           const v1::Frame& frame) {
+  PreparedFrame prepared;
+  auto run = [&]() -> Status {
+    if (!frame.has_depth()) return absl::InvalidArgumentError("frame.depth is missing");
+    OBJDB_ASSIGN_OR_RETURN(prepared.depth,
+                           decodeDepth(frame.depth(), intrinsics, &prepared.counts));
+    if (frame.has_color()) {
+      OBJDB_ASSIGN_OR_RETURN(prepared.color, decodeColor(frame.color(), prepared.depth.width,
+                                                         prepared.depth.height));
+    }
+    OBJDB_ASSIGN_OR_RETURN(prepared.segments,
+                           segmenter.segment(prepared.depth,
+                                             prepared.color ? &*prepared.color : nullptr));
+    return absl::OkStatus();
+  };
+  prepared.status = run();
+  return prepared;
+}
+
+Status integrateFrame(LiveSession& session, const v1::Frame& frame, const PreparedFrame& prepared,
+                      v1::FrameAck* ack) {
   if (session.has_frame && frame.index() <= session.last_index) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "frame.index %d is not above the previous frame's %d", frame.index(), session.last_index));
@@ -111,19 +132,11 @@ Status integrateFrame(LiveSession& session, const v1::Frame& frame, v1::FrameAck
         "frame should be near where it was recorded)",
         T_world_camera.translation().norm(), kMaxWorldExtentM));
   }
-  if (!frame.has_depth()) return absl::InvalidArgumentError("frame.depth is missing");
-  DepthCounts counts;
-  OBJDB_ASSIGN_OR_RETURN(const DepthImage depth,
-                         decodeDepth(frame.depth(), session.intrinsics, &counts));
-  std::optional<ColorImage> color;
-  if (frame.has_color()) {
-    OBJDB_ASSIGN_OR_RETURN(color, decodeColor(frame.color(), depth.width, depth.height));
-  }
-  const ColorImage* color_ptr = color ? &*color : nullptr;
-  OBJDB_ASSIGN_OR_RETURN(const segmentation::SegmentationResult segments,
-                         session.segmenter->segment(depth, color_ptr));
+  OBJDB_RETURN_IF_ERROR(prepared.status);
+  const ColorImage* color_ptr = prepared.color ? &*prepared.color : nullptr;
   OBJDB_ASSIGN_OR_RETURN(const gsm::GsmFrameResult fused,
-                         session.map->integrate(depth, segments.labels, T_world_camera, color_ptr));
+                         session.map->integrate(prepared.depth, prepared.segments.labels,
+                                                T_world_camera, color_ptr));
   session.has_frame = true;
   session.last_index = frame.index();
   session.last_timestamp = frame.timestamp_s();
@@ -131,10 +144,10 @@ Status integrateFrame(LiveSession& session, const v1::Frame& frame, v1::FrameAck
   ack->set_accepted(true);
   v1::FrameCounters& c = *ack->mutable_frame();
   c.set_valid_pixels(uint32_t(fused.tsdf.points_used));
-  c.set_missing_pixels(counts.missing);
-  c.set_invalid_pixels(counts.invalid);
+  c.set_missing_pixels(prepared.counts.missing);
+  c.set_invalid_pixels(prepared.counts.invalid);
   c.set_out_of_range_pixels(uint32_t(fused.tsdf.out_of_range));
-  c.set_segments(uint32_t(segments.segments.size()));
+  c.set_segments(uint32_t(prepared.segments.segments.size()));
   return absl::OkStatus();
 }
 

@@ -24,6 +24,7 @@
 #include "core/gsm/gsm.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "objdb/v1/objdb.pb.h"
+#include "server/proto_convert.h"
 
 namespace objdb::server {
 
@@ -107,10 +108,26 @@ StatusOr<std::shared_ptr<LiveSession>> sessionFromHeader(const v1::SessionHeader
 // Builds the session's segmenter and map (its parameters are checked).
 Status startPipeline(LiveSession& session, int integration_threads);
 
-// Steps 1-3 for one frame: checks order, timestamp and pose, decodes depth (and colour),
-// segments it and fuses it into the map; fills ack->frame. Errors (INVALID_ARGUMENT): the frame
-// is bad and nothing of it was integrated; the session carries on.
-Status integrateFrame(LiveSession& session, const v1::Frame& frame, v1::FrameAck* ack);
+// Steps 1-2 of one frame, which read nothing of the session's map: its depth (and colour)
+// decoded and segmented. Runs on the session's segmentation thread, one frame ahead of the
+// thread that fuses (integrateFrame), so that segmenting frame k+1 overlaps fusing frame k.
+// A frame that fails here is rejected by integrateFrame with this error, after the checks that
+// come before decoding (order, timestamp, pose), as if it had run in one step.
+struct PreparedFrame {
+  Status status = absl::OkStatus();  // the first decode or segmentation error
+  DepthCounts counts;
+  DepthImage depth;
+  std::optional<ColorImage> color;
+  segmentation::SegmentationResult segments;
+};
+PreparedFrame prepareFrame(segmentation::DepthSegmenter& segmenter, const Intrinsics& intrinsics,
+                           const v1::Frame& frame);
+
+// Step 3: checks order, timestamp and pose, then fuses the prepared frame into the map; fills
+// ack->frame. Errors (INVALID_ARGUMENT): the frame is bad and nothing of it was integrated; the
+// session carries on.
+Status integrateFrame(LiveSession& session, const v1::Frame& frame, const PreparedFrame& prepared,
+                      v1::FrameAck* ack);
 
 // Step 4: the segments idle for the GSM's idle time (every live one with `everything`), as jobs
 // that share one snapshot of the map, which also becomes session.scene. Runs on the thread that

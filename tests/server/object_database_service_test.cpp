@@ -625,6 +625,61 @@ TEST(ObjectDatabaseService, AmplifyingSizesAreRefusedBeforeAllocating) {
       << " for the control";
 }
 
+// The overload policy: a database that is behind never holds frames back; extraction is put off
+// and nothing is lost. segment_queue 0 is the extreme: the database is always "full", so every
+// frame is acked with no segment extracted while streaming, and EndSession's flush extracts them.
+TEST(ObjectDatabaseService, ABusyDatabasePutsExtractionOffAndLosesNoSegment) {
+  constexpr size_t kFrames = 40;
+  size_t streamed_segments = 0;
+  size_t objects[2] = {0, 0};
+  for (const int segment_queue : {64, 0}) {
+    ServerOptions options = loopbackOptions(scratchDbPath());
+    options.segment_queue = segment_queue;
+    auto server = startOrDie(options);
+    ASSERT_NE(server, nullptr);
+    auto stub = stubFor(*server);
+    // After 20 frames the camera moves 20 m away (the same view, elsewhere): what it saw first
+    // goes idle, so that a database with room gets segments while the session streams.
+    std::vector<v1::IngestRequest> requests = session("busy", kFrames);
+    for (size_t k = kFrames / 2; k < kFrames; ++k) {
+      v1::Pose& pose = *requests[k + 1].mutable_frame()->mutable_t_world_camera();
+      pose.set_x(pose.x() + 20.0);
+    }
+    const IngestResult streamed = ingest(*stub, requests);
+    ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+    const auto acks = streamed.acks();
+    ASSERT_EQ(acks.size(), kFrames);
+    for (size_t k = 0; k < kFrames; ++k) {
+      EXPECT_EQ(acks[k].index(), k);
+      EXPECT_TRUE(acks[k].accepted()) << acks[k].reason();
+    }
+    v1::GetStatsResponse stats;
+    {
+      grpc::ClientContext context;
+      setDeadline(&context);
+      ASSERT_TRUE(stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    }
+    v1::EndSessionResponse ended;
+    ASSERT_TRUE(endSession(*stub, "busy", &ended).ok());
+    const auto& c = ended.summary().counters();
+    EXPECT_EQ(c.frames_integrated(), kFrames);
+    EXPECT_GT(c.segments_extracted(), 0u);
+    objects[segment_queue == 0 ? 1 : 0] = listObjects(*stub, "", 0, /*structure=*/true).size();
+    if (segment_queue == 0) {
+      EXPECT_EQ(streamed.count(v1::IngestResponse::kSegment), 0u)
+          << "nothing is extracted while the database is full";
+      EXPECT_EQ(stats.extractions_deferred(), kFrames);
+    } else {
+      streamed_segments = streamed.count(v1::IngestResponse::kSegment);
+      EXPECT_EQ(stats.extractions_deferred(), 0u);
+    }
+  }
+  EXPECT_GT(streamed_segments, 0u) << "with room, segments go to the database while streaming";
+  // Put off, not dropped: the flush gives the database the objects of the scene all the same.
+  EXPECT_GT(objects[1], 0u);
+  EXPECT_EQ(objects[1], objects[0]);
+}
+
 TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOne) {
   const std::string db_path = scratchDbPath();
   auto server = startOrDie(loopbackOptions(db_path));
