@@ -1,9 +1,11 @@
 #include "core/tsdf/tsdf_integrator.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <thread>
+#include <tuple>
 
 #include "absl/container/flat_hash_set.h"
 
@@ -50,60 +52,85 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   // 1. Blocks within the truncation band of the measured points, bundled per block. Allocation
   // looks at every other pixel in both directions: at the longest ray (3.5 m at VGA) neighbouring
   // samples are ~1.3 cm apart, far below a block (16 cm), so no block of the band is missed except
-  // slivers thinner than that spacing. Along each ray the band is sampled every voxel.
-  absl::flat_hash_set<BlockIndex, BlockIndexHash> touched;
-  BlockIndex last(INT32_MIN, INT32_MIN, INT32_MIN);
+  // slivers thinner than that spacing. Along each ray the band is sampled every voxel. The rows
+  // are split over the threads, each with its own set; the sets are merged in thread order.
   const Eigen::Vector3f origin = T_wc.translation();
   const float step = layer->voxelSize();
   const float carve = params_.carve_distance_m;
   const float carve_step = 0.5f * layer->voxelSize() * float(layer->voxelsPerSide());
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const float z = depth.data[size_t(v) * w + u];
-      if (!isValidDepth(z)) {
-        ++stats.invalid_depth;
-        continue;
+  struct RowsResult {
+    absl::flat_hash_set<BlockIndex, BlockIndexHash> touched;
+    size_t invalid = 0, out_of_range = 0, used = 0;
+  };
+  auto touch_rows = [&](int v_begin, int v_end, RowsResult* out) {
+    BlockIndex last(INT32_MIN, INT32_MIN, INT32_MIN);
+    auto touch = [&](const BlockIndex& b) {
+      if (b != last) {
+        out->touched.insert(b);
+        last = b;
       }
-      if (!(z >= params_.min_ray_length_m && z <= params_.max_ray_length_m)) {
-        ++stats.out_of_range;
-        continue;
-      }
-      ++stats.points_used;
-      if ((u | v) & 1) continue;
-      const Eigen::Vector3f p =
-          T_wc * Eigen::Vector3f((float(u) - cx) * z / fx, (float(v) - cy) * z / fy, z);
-      const Eigen::Vector3f ray = (p - origin).normalized();
-      for (float s = -trunc; s <= trunc + 1e-6f; s += step) {
-        const BlockIndex b = layer->blockIndexOf(p + s * ray);
-        if (b != last) {
-          touched.insert(b);
-          last = b;
+    };
+    for (int v = v_begin; v < v_end; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const float z = depth.data[size_t(v) * w + u];
+        if (!isValidDepth(z)) {
+          ++out->invalid;
+          continue;
         }
-      }
-      // Free space in front of the band (every 4th pixel each way, half-block steps: the
-      // samples of neighbouring rays are far closer than a block).
-      if (carve > 0.0f && ((u | v) & 3) == 0) {
-        const float reach = std::min(trunc + carve, (p - origin).norm() - params_.min_ray_length_m);
-        const int samples = int(std::ceil(carve / carve_step));
-        for (int k = 1; k <= samples; ++k) {
-          const float s = trunc + std::min(float(k) * carve_step, carve);
-          if (s > reach) break;
-          const BlockIndex b = layer->blockIndexOf(p - s * ray);
-          if (b != last) {
-            touched.insert(b);
-            last = b;
+        if (!(z >= params_.min_ray_length_m && z <= params_.max_ray_length_m)) {
+          ++out->out_of_range;
+          continue;
+        }
+        ++out->used;
+        if ((u | v) & 1) continue;
+        const Eigen::Vector3f p =
+            T_wc * Eigen::Vector3f((float(u) - cx) * z / fx, (float(v) - cy) * z / fy, z);
+        const Eigen::Vector3f ray = (p - origin).normalized();
+        for (float s = -trunc; s <= trunc + 1e-6f; s += step) touch(layer->blockIndexOf(p + s * ray));
+        // Free space in front of the band (every 4th pixel each way, half-block steps: the
+        // samples of neighbouring rays are far closer than a block).
+        if (carve > 0.0f && ((u | v) & 3) == 0) {
+          const float reach =
+              std::min(trunc + carve, (p - origin).norm() - params_.min_ray_length_m);
+          const int samples = int(std::ceil(carve / carve_step));
+          for (int k = 1; k <= samples; ++k) {
+            const float s = trunc + std::min(float(k) * carve_step, carve);
+            if (s > reach) break;
+            touch(layer->blockIndexOf(p - s * ray));
           }
         }
       }
     }
+  };
+  const size_t row_threads = std::min<size_t>(size_t(threads_), size_t(h));
+  std::vector<RowsResult> rows(row_threads);
+  if (row_threads == 1) {
+    touch_rows(0, h, &rows[0]);
+  } else {
+    std::vector<std::thread> workers;
+    for (size_t t = 0; t < row_threads; ++t) {
+      // The sampling above looks at absolute rows: the same samples for any thread count.
+      const int begin = int(size_t(h) * t / row_threads);
+      const int end = int(size_t(h) * (t + 1) / row_threads);
+      workers.emplace_back(touch_rows, begin, end, &rows[t]);
+    }
+    for (auto& worker : workers) worker.join();
   }
+  absl::flat_hash_set<BlockIndex, BlockIndexHash>& touched = rows[0].touched;
+  for (size_t t = 0; t < row_threads; ++t) {
+    stats.invalid_depth += rows[t].invalid;
+    stats.out_of_range += rows[t].out_of_range;
+    stats.points_used += rows[t].used;
+    if (t > 0) touched.insert(rows[t].touched.begin(), rows[t].touched.end());
+  }
+  // Allocated in index order: the layer's state does not depend on the thread count.
+  std::vector<BlockIndex> indices(touched.begin(), touched.end());
+  std::sort(indices.begin(), indices.end(), [](const BlockIndex& a, const BlockIndex& b) {
+    return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
+  });
   std::vector<TsdfBlock*> blocks;
-  std::vector<BlockIndex> indices;
-  blocks.reserve(touched.size());
-  for (const BlockIndex& b : touched) {
-    blocks.push_back(&layer->allocateBlock(b));
-    indices.push_back(b);
-  }
+  blocks.reserve(indices.size());
+  for (const BlockIndex& b : indices) blocks.push_back(&layer->allocateBlock(b));
   stats.blocks_touched = blocks.size();
 
   // 2. Every voxel of those blocks: project, compare with the measured depth, fuse.
@@ -111,8 +138,16 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   const int vps = layer->voxelsPerSide();
   const float voxel = layer->voxelSize();
   const float dropoff_start = -voxel;
-  auto integrate_range = [&](size_t first, size_t last_block, size_t* updated) {
+  // Blocks are handed out in small chunks from a shared counter: blocks differ in cost (a
+  // surface block against one carved in free space), so fixed halves leave a thread idle.
+  constexpr size_t kChunk = 8;
+  std::atomic<size_t> next_block{0};
+  auto integrate_blocks = [&](size_t* updated) {
     size_t n = 0;
+    while (true) {
+    const size_t first = next_block.fetch_add(kChunk);
+    if (first >= blocks.size()) break;
+    const size_t last_block = std::min(blocks.size(), first + kChunk);
     for (size_t k = first; k < last_block; ++k) {
       TsdfBlock& block = *blocks[k];
       const Eigen::Vector3i base = indices[k] * vps;
@@ -147,7 +182,8 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
             if (color) {
               const Rgb8 m = color->data[size_t(v) * w + u];
               auto blend = [&](uint8_t old, uint8_t now) {
-                return uint8_t(std::lround((float(old) * vox.weight + float(now) * weight) / total));
+                // Non-negative: + 0.5 and truncation round to nearest (lround is a libm call).
+                return uint8_t((float(old) * vox.weight + float(now) * weight) / total + 0.5f);
               };
               vox.color = Rgb8{blend(vox.color.r, m.r), blend(vox.color.g, m.g), blend(vox.color.b, m.b)};
             }
@@ -159,20 +195,17 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
       }
       if (any) block.updated = true;
     }
+    }
     *updated = n;
   };
   const size_t n_threads = std::min<size_t>(size_t(threads_), std::max<size_t>(1, blocks.size()));
   std::vector<size_t> updated(n_threads, 0);
   if (n_threads == 1) {
-    integrate_range(0, blocks.size(), &updated[0]);
+    integrate_blocks(&updated[0]);
   } else {
     std::vector<std::thread> workers;
-    const size_t chunk = (blocks.size() + n_threads - 1) / n_threads;
-    for (size_t t = 0; t < n_threads; ++t) {
-      const size_t first = std::min(blocks.size(), t * chunk);
-      const size_t end = std::min(blocks.size(), first + chunk);
-      workers.emplace_back(integrate_range, first, end, &updated[t]);
-    }
+    for (size_t t = 1; t < n_threads; ++t) workers.emplace_back(integrate_blocks, &updated[t]);
+    integrate_blocks(&updated[0]);  // this thread works too
     for (auto& worker : workers) worker.join();
   }
   for (size_t n : updated) stats.voxels_updated += n;
