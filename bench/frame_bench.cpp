@@ -159,7 +159,9 @@ void runOffline(const Sequence& seq, const Params& params, int threads) {
     }
     const Transform T = server::fromProto(f.t_world_camera(), "pose").value();
     const double decode_ms = msSince(t);
-    auto seg = segmenter->segment(*depth, color ? &*color : nullptr);
+    // As the server runs it: the label image, no per-segment point lists.
+    auto seg = segmenter->segment(*depth, color ? &*color : nullptr, nullptr,
+                                  {/*segment_points=*/false});
     if (!seg.ok()) die(std::string(seg.status().message()));
     auto fused = map->integrate(*depth, seg->labels, T, color ? &*color : nullptr);
     if (!fused.ok()) die(std::string(fused.status().message()));

@@ -482,6 +482,46 @@ void growLabels(const DepthImage& depth, const PointImage& points, const Planar3
   }
 }
 
+// Each segment's pixels, points, normals (and mean colour) from the final label image; counts
+// the measured pixels left on a boundary.
+void fillSegments(const LabelImage& labels, const DepthImage& depth, const PointImage& points,
+                  const Planar3f& normals, const ColorImage* color, SegmentationResult* result) {
+  const size_t n_pixels = labels.data.size();
+  const size_t n = result->segments.size();
+  std::vector<size_t> counts(n + 1, 0);
+  for (size_t i = 0; i < n_pixels; ++i) ++counts[size_t(labels.data[i])];
+  for (size_t l = 1; l <= n; ++l) {
+    Segment& s = result->segments[l - 1];
+    s.pixels.reserve(counts[l]);
+    s.points.reserve(counts[l]);
+    s.normals.reserve(counts[l]);
+  }
+  std::vector<Eigen::Vector3d> color_sums(color ? n : 0, Eigen::Vector3d::Zero());
+  for (size_t i = 0; i < n_pixels; ++i) {
+    const int32_t l = labels.data[i];
+    if (l == 0) {
+      if (depth.data[i] > 0.0f) ++result->boundary_pixels;
+      continue;
+    }
+    Segment& s = result->segments[size_t(l - 1)];
+    s.pixels.push_back(uint32_t(i));
+    s.points.push_back(points.data[i]);
+    s.normals.emplace_back(normals.x[i], normals.y[i], normals.z[i]);
+    if (color) {
+      const Rgb8 c = color->data[i];
+      color_sums[size_t(l - 1)] += Eigen::Vector3d(c.r, c.g, c.b);
+    }
+  }
+  if (color) {
+    for (auto& s : result->segments) {
+      const Eigen::Vector3d m =
+          color_sums[size_t(s.label - 1)] / double(std::max<size_t>(1, s.pixels.size()));
+      s.mean_color = Rgb8{uint8_t(std::lround(m.x())), uint8_t(std::lround(m.y())),
+                          uint8_t(std::lround(m.z()))};
+    }
+  }
+}
+
 }  // namespace
 
 void computeNormals(const PointImage& points, int window, float max_relative_distance,
@@ -529,7 +569,8 @@ StatusOr<DepthSegmenter> DepthSegmenter::create(const SegmentationParams& params
 
 StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
                                                      const ColorImage* color,
-                                                     SegmentationMaps* maps) {
+                                                     SegmentationMaps* maps,
+                                                     const SegmentOutputs& outputs) {
   const auto start = Clock::now();
   OBJDB_RETURN_IF_ERROR(intrinsics_.checkImageSize(depth.width, depth.height, "depth image"));
   if (depth.data.size() != size_t(depth.width) * size_t(depth.height)) {
@@ -620,36 +661,12 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
 
   t = Clock::now();
   result.segments.resize(size_t(next));
-  std::vector<size_t> counts(size_t(next) + 1, 0);
-  for (size_t i = 0; i < n_pixels; ++i) ++counts[size_t(result.labels.data[i])];
-  for (int32_t l = 1; l <= next; ++l) {
-    Segment& s = result.segments[size_t(l - 1)];
-    s.label = l;
-    s.pixels.reserve(counts[size_t(l)]);
-    s.points.reserve(counts[size_t(l)]);
-    s.normals.reserve(counts[size_t(l)]);
-  }
-  std::vector<Eigen::Vector3d> color_sums(color ? size_t(next) : 0, Eigen::Vector3d::Zero());
-  for (size_t i = 0; i < n_pixels; ++i) {
-    const int32_t l = result.labels.data[i];
-    if (l == 0) {
-      if (depth_.data[i] > 0.0f) ++result.boundary_pixels;
-      continue;
-    }
-    Segment& s = result.segments[size_t(l - 1)];
-    s.pixels.push_back(uint32_t(i));
-    s.points.push_back(points_.data[i]);
-    s.normals.emplace_back(normals_.x[i], normals_.y[i], normals_.z[i]);
-    if (color) {
-      const Rgb8 c = color->data[i];
-      color_sums[size_t(l - 1)] += Eigen::Vector3d(c.r, c.g, c.b);
-    }
-  }
-  if (color) {
-    for (auto& s : result.segments) {
-      const Eigen::Vector3d m = color_sums[size_t(s.label - 1)] / double(std::max<size_t>(1, s.pixels.size()));
-      s.mean_color = Rgb8{uint8_t(std::lround(m.x())), uint8_t(std::lround(m.y())),
-                          uint8_t(std::lround(m.z()))};
+  for (int32_t l = 1; l <= next; ++l) result.segments[size_t(l - 1)].label = l;
+  if (outputs.segment_points) {
+    fillSegments(result.labels, depth_, points_, normals_, color, &result);
+  } else {
+    for (size_t i = 0; i < n_pixels; ++i) {
+      result.boundary_pixels += result.labels.data[i] == 0 && depth_.data[i] > 0.0f ? 1 : 0;
     }
   }
   result.timings.segments_ms = msSince(t);

@@ -101,6 +101,13 @@ struct SegmentationMaps {
   MaskImage boundaries;       // discontinuity ∪ concave ∪ invalid
 };
 
+// What segment() fills in beyond the label image.
+struct SegmentOutputs {
+  // Each segment's pixels, points, normals and mean colour. Without them the segments hold only
+  // their labels (the GSM fuses the label image alone: the server's frame path skips them).
+  bool segment_points = true;
+};
+
 class DepthSegmenter {
  public:
   // Params are validated; the minimum segment size is given for VGA (640×480) and scaled with
@@ -112,7 +119,8 @@ class DepthSegmenter {
   // All-invalid depth gives an empty result, not an error.
   StatusOr<SegmentationResult> segment(const DepthImage& depth,
                                        const ColorImage* color = nullptr,
-                                       SegmentationMaps* maps = nullptr);
+                                       SegmentationMaps* maps = nullptr,
+                                       const SegmentOutputs& outputs = {});
 
   const SegmentationParams& params() const { return params_; }
   int minSegmentPixels() const { return min_segment_px_; }

@@ -102,7 +102,8 @@ PreparedFrame prepareFrame(segmentation::DepthSegmenter& segmenter, const Intrin
     }
     OBJDB_ASSIGN_OR_RETURN(prepared.segments,
                            segmenter.segment(prepared.depth,
-                                             prepared.color ? &*prepared.color : nullptr));
+                                             prepared.color ? &*prepared.color : nullptr,
+                                             nullptr, {/*segment_points=*/false}));
     return absl::OkStatus();
   };
   prepared.status = run();

@@ -183,6 +183,34 @@ TEST(DepthSegmenter, TwoBoxesWithSensorNoiseGiveThreeLargeSegments) {
   EXPECT_GE(overlap.coverage(kBoxB), 0.80) << overlap.describe();
 }
 
+// The server asks for the label image only: the same labels, segments and counts, without the
+// per-segment point lists.
+TEST(DepthSegmenter, LabelsOnlyGivesTheSameLabelsWithoutPointLists) {
+  const TwoBoxes world;
+  const Intrinsics k = Intrinsics::vga();
+  const sim::DepthNoiseParams noise;
+  const RenderOutput frame = render(k, world.instances(), world.camera(), &noise);
+  DepthSegmenter segmenter = makeSegmenter(k);
+  StatusOr<SegmentationResult> full = segmenter.segment(frame.depth, &frame.color);
+  StatusOr<SegmentationResult> labels_only =
+      segmenter.segment(frame.depth, &frame.color, nullptr, {/*segment_points=*/false});
+  ASSERT_TRUE(full.ok()) << full.status();
+  ASSERT_TRUE(labels_only.ok()) << labels_only.status();
+  EXPECT_EQ(labels_only->labels.data, full->labels.data);
+  ASSERT_EQ(labels_only->segments.size(), full->segments.size());
+  ASSERT_GE(full->segments.size(), 3u);
+  for (size_t i = 0; i < full->segments.size(); ++i) {
+    EXPECT_EQ(labels_only->segments[i].label, full->segments[i].label);
+    EXPECT_FALSE(full->segments[i].pixels.empty());
+    EXPECT_TRUE(labels_only->segments[i].pixels.empty());
+    EXPECT_TRUE(labels_only->segments[i].points.empty());
+    EXPECT_FALSE(labels_only->segments[i].mean_color.has_value());
+  }
+  EXPECT_EQ(labels_only->boundary_pixels, full->boundary_pixels);
+  EXPECT_GT(full->boundary_pixels, 0u);
+  EXPECT_EQ(labels_only->invalid_pixels, full->invalid_pixels);
+}
+
 // --- Concave edges split, convex edges do not ----------------------------------------------------
 
 TEST(DepthSegmenter, ConcaveFloorWallCornerSplitsIntoTwoSegments) {
