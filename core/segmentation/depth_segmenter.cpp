@@ -1,5 +1,8 @@
 #include "core/segmentation/depth_segmenter.h"
 
+#include "core/common/simd.h"
+#include "core/segmentation/label_growth.h"
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -38,6 +41,7 @@ void resize(Image<T>* image, int w, int h, T fill) {
 
 }  // namespace
 
+OBJDB_VECTOR_CLONES
 size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spread) {
   const int w = depth->width, h = depth->height;
   size_t filled = 0;
@@ -75,6 +79,7 @@ size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spre
   return filled;
 }
 
+OBJDB_VECTOR_CLONES
 void depthToPoints(const DepthImage& depth, const Intrinsics& k, PointImage* points) {
   const int w = depth.width, h = depth.height;
   resize(points, w, h, Eigen::Vector3f::Zero().eval());
@@ -135,7 +140,8 @@ inline float sameSurfaceMask(float zj, float z, float max_relative_distance) {
 // o += mask · (x, y, z, n) over `count` pixels, where mask says whether the neighbour (depth zk)
 // is on the centre pixel's surface (depth zc); n = 1 when `nk` is null. Restrict pointers and
 // one flat loop: it vectorises.
-void accumulateSameSurface(const float* __restrict zc, const float* __restrict zk,
+OBJDB_INLINE_KERNEL void accumulateSameSurface(const float* __restrict zc,
+                                              const float* __restrict zk,
                            const float* __restrict xk, const float* __restrict yk,
                            const float* __restrict vk, const float* __restrict nk, int count,
                            float max_relative_distance, float* __restrict ox,
@@ -169,6 +175,7 @@ void accumulateSameSurface(const float* __restrict zc, const float* __restrict z
 // (left out) or of a pixel on this surface, which left it out — for jumps above about twice the
 // threshold (the test is relative to each centre pixel, so it is not transitive below that). Direct sums over the window
 // (2 × 5 taps at VGA), every loop branch-free so that it vectorises.
+OBJDB_VECTOR_CLONES
 void smoothPoints(const PointImage& points, int window, float max_relative_distance,
                   Planar3f* smoothed) {
   const int w = points.width, h = points.height, r = window / 2;
@@ -289,7 +296,7 @@ void normalAtBorder(const float* z_img, const Planar3f& S, int w, int h, int u, 
 }
 
 // Interior normals of one row (every neighbour `offset` pixels away exists).
-void normalsRow(const float* __restrict z_img, const float* __restrict sx,
+OBJDB_INLINE_KERNEL void normalsRow(const float* __restrict z_img, const float* __restrict sx,
                 const float* __restrict sy, const float* __restrict sz, size_t first, int count,
                 size_t o, size_t ow, float max_relative_distance, float* __restrict nx,
                 float* __restrict ny, float* __restrict nz) {
@@ -311,6 +318,7 @@ void normalsRow(const float* __restrict z_img, const float* __restrict sx,
 }
 
 // Normals of every pixel from the smoothed points (see computeNormals).
+OBJDB_VECTOR_CLONES
 void normalsFromSmoothed(const float* z_img, const Planar3f& S, int w, int h, int offset,
                          float max_relative_distance, Planar3f* normals) {
   normals->resize(size_t(w) * size_t(h));
@@ -332,7 +340,7 @@ void normalsFromSmoothed(const float* z_img, const Planar3f& S, int w, int h, in
 }
 
 // One row of pair values for convexityPlanes: i-side and j-side planes, `count` pairs.
-void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
+OBJDB_INLINE_KERNEL void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
                     const float* __restrict pzi, const float* __restrict nxi,
                     const float* __restrict nyi, const float* __restrict nzi,
                     const float* __restrict pxj, const float* __restrict pyj,
@@ -362,6 +370,7 @@ void convexityPairs(const float* __restrict pxi, const float* __restrict pyi,
 // pixel, and its value lowers both pixels' minimum: 4 forward directions cover the
 // 8-neighbourhood at distance k. Per row, the pair values go to `pair` first and are then
 // min-ed into both ends: every loop is branch-free and vectorises.
+OBJDB_VECTOR_CLONES
 void convexityPlanes(const Planar3f& P, const Planar3f& N, int w, int h, int window,
                      float offset_m, float offset_per_m2, float max_relative_jump,
                      float* __restrict C) {
@@ -414,71 +423,20 @@ void fromPlanes(const Planar3f& planes, int w, int h, Image<Eigen::Vector3f>* im
   }
 }
 
-// Grows labels into unlabelled measured pixels (see DepthSegmenter::segment).
-bool hasNormal(const Planar3f& normals, size_t i) {
-  return normals.x[i] != 0.0f || normals.y[i] != 0.0f || normals.z[i] != 0.0f;
-}
-
-void growLabels(const DepthImage& depth, const PointImage& points, const Planar3f& normals,
-                int iterations, float max_distance, LabelImage* labels) {
-  const int w = depth.width, h = depth.height;
-  int32_t* L = labels->data.data();
-  // Only pixels with a normal join a segment: segments promise unit normals.
-  auto unlabelled = [&](size_t i) {
-    return L[i] == 0 && depth.data[i] > 0.0f && hasNormal(normals, i);
-  };
-  std::vector<uint32_t> frontier, next;
-  std::vector<std::pair<uint32_t, int32_t>> changes;
-  std::vector<uint8_t> queued(size_t(w) * size_t(h), 0);
-  auto push_neighbours = [&](size_t i, std::vector<uint32_t>* out) {
-    const int u = int(i % size_t(w)), v = int(i / size_t(w));
-    const int nu[4] = {u - 1, u + 1, u, u}, nv[4] = {v, v, v - 1, v + 1};
-    for (int d = 0; d < 4; ++d) {
-      if (nu[d] < 0 || nv[d] < 0 || nu[d] >= w || nv[d] >= h) continue;
-      const size_t j = size_t(nv[d]) * size_t(w) + size_t(nu[d]);
-      if (unlabelled(j) && !queued[j]) {
-        queued[j] = 1;
-        out->push_back(uint32_t(j));
-      }
-    }
-  };
-  // The first frontier: growable pixels with a labelled 4-neighbour.
-  for (int v = 0; v < h; ++v) {
-    for (int u = 0; u < w; ++u) {
-      const size_t i = size_t(v) * size_t(w) + size_t(u);
-      if (!unlabelled(i)) continue;
-      const bool touches = (u > 0 && L[i - 1] != 0) || (u + 1 < w && L[i + 1] != 0) ||
-                           (v > 0 && L[i - size_t(w)] != 0) || (v + 1 < h && L[i + size_t(w)] != 0);
-      if (touches) {
-        queued[i] = 1;
-        frontier.push_back(uint32_t(i));
-      }
-    }
-  }
-  for (int it = 0; it < iterations && !frontier.empty(); ++it) {
-    changes.clear();
-    for (uint32_t i : frontier) {
-      queued[i] = 0;
-      const int u = int(i % uint32_t(w)), v = int(i / uint32_t(w));
-      const int nu[4] = {u - 1, u + 1, u, u}, nv[4] = {v, v, v - 1, v + 1};
-      int32_t best = 0;
-      float best_gap = max_distance;
-      for (int d = 0; d < 4; ++d) {
-        if (nu[d] < 0 || nv[d] < 0 || nu[d] >= w || nv[d] >= h) continue;
-        const size_t j = size_t(nv[d]) * size_t(w) + size_t(nu[d]);
-        if (L[j] == 0) continue;
-        const float gap = (points.data[j] - points.data[i]).norm();
-        if (gap <= best_gap) {
-          best_gap = gap;
-          best = L[j];
-        }
-      }
-      if (best != 0) changes.emplace_back(i, best);
-    }
-    for (const auto& [i, label] : changes) L[i] = label;
-    next.clear();
-    for (const auto& [i, label] : changes) push_neighbours(i, &next);
-    frontier.swap(next);
+// Boundary pixels (unmeasured, a depth edge, concave or without a normal) and their complement.
+OBJDB_VECTOR_CLONES
+void boundaryMasks(const float* __restrict d, const uint8_t* __restrict e,
+                   const float* __restrict c, const Planar3f& normals, float threshold, size_t n,
+                   uint8_t* __restrict b, uint8_t* __restrict f) {
+  const float* __restrict nx = normals.x.data();
+  const float* __restrict ny = normals.y.data();
+  const float* __restrict nz = normals.z.data();
+  for (size_t i = 0; i < n; ++i) {
+    // Bitwise, not short-circuit: the loop vectorises.
+    const bool normal = (nx[i] != 0.0f) | (ny[i] != 0.0f) | (nz[i] != 0.0f);
+    const bool free = (d[i] > 0.0f) & (e[i] == 0) & !(c[i] < threshold) & normal;
+    b[i] = free ? 0 : 1;
+    f[i] = free ? 1 : 0;
   }
 }
 
@@ -627,13 +585,8 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   t = Clock::now();
   resize(&boundaries_, w, h, uint8_t{0});
   cv::Mat free_space(h, w, CV_8U);
-  for (size_t i = 0; i < n_pixels; ++i) {
-    const bool boundary = !(depth_.data[i] > 0.0f) || edges_.data[i] != 0 ||
-                          convexity_.data[i] < params_.convexity_threshold ||
-                          !hasNormal(normals_, i);
-    boundaries_.data[i] = boundary ? 1 : 0;
-    free_space.data[i] = boundary ? 0 : 1;
-  }
+  boundaryMasks(depth_.data.data(), edges_.data.data(), convexity_.data.data(), normals_,
+                params_.convexity_threshold, n_pixels, boundaries_.data.data(), free_space.data);
   // Components into a reused buffer; areas from one histogram pass (OpenCV's stats would also
   // compute bounding boxes and centroids we do not use).
   thread_local cv::Mat components;
@@ -655,7 +608,7 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
 
   // Grow labels into boundary pixels whose 3D point is close to a labelled neighbour's, one ring
   // per pass; each pass looks only at the frontier the previous pass created.
-  growLabels(depth_, points_, normals_, params_.label_growth_iterations,
+  growLabels(depth_, normals_, intrinsics_, params_.label_growth_iterations,
              params_.max_label_growth_distance_m, &result.labels);
   result.timings.labels_ms = msSince(t);
 
