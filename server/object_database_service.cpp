@@ -2,12 +2,12 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
+#include <future>
 #include <mutex>
 #include <thread>
-#include <cmath>
-#include <future>
 #include <utility>
 
 #include "absl/strings/str_format.h"

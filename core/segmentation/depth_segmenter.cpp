@@ -440,10 +440,9 @@ void boundaryMasks(const float* __restrict d, const uint8_t* __restrict e,
   }
 }
 
-// Each segment's pixels, points, normals (and mean colour) from the final label image; counts
-// the measured pixels left on a boundary.
-void fillSegments(const LabelImage& labels, const DepthImage& depth, const PointImage& points,
-                  const Planar3f& normals, const ColorImage* color, SegmentationResult* result) {
+// Each segment's pixels, points, normals (and mean colour) from the final label image.
+void fillSegments(const LabelImage& labels, const PointImage& points, const Planar3f& normals,
+                  const ColorImage* color, SegmentationResult* result) {
   const size_t n_pixels = labels.data.size();
   const size_t n = result->segments.size();
   std::vector<size_t> counts(n + 1, 0);
@@ -457,10 +456,7 @@ void fillSegments(const LabelImage& labels, const DepthImage& depth, const Point
   std::vector<Eigen::Vector3d> color_sums(color ? n : 0, Eigen::Vector3d::Zero());
   for (size_t i = 0; i < n_pixels; ++i) {
     const int32_t l = labels.data[i];
-    if (l == 0) {
-      if (depth.data[i] > 0.0f) ++result->boundary_pixels;
-      continue;
-    }
+    if (l == 0) continue;
     Segment& s = result->segments[size_t(l - 1)];
     s.pixels.push_back(uint32_t(i));
     s.points.push_back(points.data[i]);
@@ -615,13 +611,10 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   t = Clock::now();
   result.segments.resize(size_t(next));
   for (int32_t l = 1; l <= next; ++l) result.segments[size_t(l - 1)].label = l;
-  if (outputs.segment_points) {
-    fillSegments(result.labels, depth_, points_, normals_, color, &result);
-  } else {
-    for (size_t i = 0; i < n_pixels; ++i) {
-      result.boundary_pixels += result.labels.data[i] == 0 && depth_.data[i] > 0.0f ? 1 : 0;
-    }
+  for (size_t i = 0; i < n_pixels; ++i) {
+    result.boundary_pixels += result.labels.data[i] == 0 && depth_.data[i] > 0.0f ? 1 : 0;
   }
+  if (outputs.segment_points) fillSegments(result.labels, points_, normals_, color, &result);
   result.timings.segments_ms = msSince(t);
 
   if (maps) {

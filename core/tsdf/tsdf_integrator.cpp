@@ -104,16 +104,14 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   };
   const size_t row_threads = std::min<size_t>(size_t(threads_), size_t(h));
   std::vector<RowsResult> rows(row_threads);
-  if (row_threads == 1) {
-    touch_rows(0, h, &rows[0]);
-  } else {
+  {
+    // The sampling above looks at absolute rows: the same samples for any thread count.
+    auto row_of = [&](size_t t) { return int(size_t(h) * t / row_threads); };
     std::vector<std::thread> workers;
-    for (size_t t = 0; t < row_threads; ++t) {
-      // The sampling above looks at absolute rows: the same samples for any thread count.
-      const int begin = int(size_t(h) * t / row_threads);
-      const int end = int(size_t(h) * (t + 1) / row_threads);
-      workers.emplace_back(touch_rows, begin, end, &rows[t]);
+    for (size_t t = 1; t < row_threads; ++t) {
+      workers.emplace_back(touch_rows, row_of(t), row_of(t + 1), &rows[t]);
     }
+    touch_rows(row_of(0), row_of(1), &rows[0]);  // this thread works too
     for (auto& worker : workers) worker.join();
   }
   absl::flat_hash_set<BlockIndex, BlockIndexHash>& touched = rows[0].touched;
@@ -144,57 +142,56 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   std::atomic<size_t> next_block{0};
   auto integrate_blocks = [&](size_t* updated) {
     size_t n = 0;
-    while (true) {
-    const size_t first = next_block.fetch_add(kChunk);
-    if (first >= blocks.size()) break;
-    const size_t last_block = std::min(blocks.size(), first + kChunk);
-    for (size_t k = first; k < last_block; ++k) {
-      TsdfBlock& block = *blocks[k];
-      const Eigen::Vector3i base = indices[k] * vps;
-      bool any = false;
-      // Voxel centres in the camera frame, stepped along x: one add per voxel.
-      const Eigen::Vector3f step_x = T_cw.linear() * Eigen::Vector3f(voxel, 0.0f, 0.0f);
-      for (int z = 0; z < vps; ++z) {
-        for (int y = 0; y < vps; ++y) {
-          Eigen::Vector3f c = T_cw * layer->voxelCenter(base + Eigen::Vector3i(0, y, z)) - step_x;
-          for (int x = 0; x < vps; ++x) {
-            c += step_x;
-            if (!(c.z() > 0.0f)) continue;
-            // Nearest pixel: the range test on the shifted coordinate first, then truncation
-            // (cheaper than lround, and NaN fails the test).
-            const float fu = fx * c.x() / c.z() + cx + 0.5f;
-            const float fv = fy * c.y() / c.z() + cy + 0.5f;
-            if (!(fu >= 0.0f && fv >= 0.0f && fu < float(w) && fv < float(h))) continue;
-            const int u = int(fu), v = int(fv);
-            const float d = depth.data[size_t(v) * w + u];
-            if (!(isValidDepth(d) && d >= params_.min_ray_length_m && d <= params_.max_ray_length_m)) {
-              continue;
+    for (size_t first = next_block.fetch_add(kChunk); first < blocks.size();
+         first = next_block.fetch_add(kChunk)) {
+      const size_t last_block = std::min(blocks.size(), first + kChunk);
+      for (size_t k = first; k < last_block; ++k) {
+        TsdfBlock& block = *blocks[k];
+        const Eigen::Vector3i base = indices[k] * vps;
+        bool any = false;
+        // Voxel centres in the camera frame, stepped along x: one add per voxel.
+        const Eigen::Vector3f step_x = T_cw.linear() * Eigen::Vector3f(voxel, 0.0f, 0.0f);
+        for (int z = 0; z < vps; ++z) {
+          for (int y = 0; y < vps; ++y) {
+            Eigen::Vector3f c = T_cw * layer->voxelCenter(base + Eigen::Vector3i(0, y, z)) - step_x;
+            for (int x = 0; x < vps; ++x) {
+              c += step_x;
+              if (!(c.z() > 0.0f)) continue;
+              // Nearest pixel: the range test on the shifted coordinate first, then truncation
+              // (cheaper than lround, and NaN fails the test).
+              const float fu = fx * c.x() / c.z() + cx + 0.5f;
+              const float fv = fy * c.y() / c.z() + cy + 0.5f;
+              if (!(fu >= 0.0f && fv >= 0.0f && fu < float(w) && fv < float(h))) continue;
+              const int u = int(fu), v = int(fv);
+              const float d = depth.data[size_t(v) * w + u];
+              if (!(isValidDepth(d) && d >= params_.min_ray_length_m && d <= params_.max_ray_length_m)) {
+                continue;
+              }
+              const float sdf = d - c.z();
+              if (sdf < -trunc) continue;  // hidden behind the surface: unobserved
+              float weight = 1.0f;
+              if (sdf < dropoff_start) weight *= (trunc + sdf) / (trunc + dropoff_start);
+              if (!(weight > 0.0f)) continue;
+              const float clamped = std::min(sdf, trunc);
+              TsdfVoxel& vox = block.voxel(size_t(x) + size_t(vps) * (size_t(y) + size_t(vps) * size_t(z)));
+              const float total = vox.weight + weight;
+              vox.distance = (vox.distance * vox.weight + clamped * weight) / total;
+              if (color) {
+                const Rgb8 m = color->data[size_t(v) * w + u];
+                auto blend = [&](uint8_t old, uint8_t now) {
+                  // Non-negative: + 0.5 and truncation round to nearest (lround is a libm call).
+                  return uint8_t((float(old) * vox.weight + float(now) * weight) / total + 0.5f);
+                };
+                vox.color = Rgb8{blend(vox.color.r, m.r), blend(vox.color.g, m.g), blend(vox.color.b, m.b)};
+              }
+              vox.weight = std::min(total, params_.max_weight);
+              any = true;
+              ++n;
             }
-            const float sdf = d - c.z();
-            if (sdf < -trunc) continue;  // hidden behind the surface: unobserved
-            float weight = 1.0f;
-            if (sdf < dropoff_start) weight *= (trunc + sdf) / (trunc + dropoff_start);
-            if (!(weight > 0.0f)) continue;
-            const float clamped = std::min(sdf, trunc);
-            TsdfVoxel& vox = block.voxel(size_t(x) + size_t(vps) * (size_t(y) + size_t(vps) * size_t(z)));
-            const float total = vox.weight + weight;
-            vox.distance = (vox.distance * vox.weight + clamped * weight) / total;
-            if (color) {
-              const Rgb8 m = color->data[size_t(v) * w + u];
-              auto blend = [&](uint8_t old, uint8_t now) {
-                // Non-negative: + 0.5 and truncation round to nearest (lround is a libm call).
-                return uint8_t((float(old) * vox.weight + float(now) * weight) / total + 0.5f);
-              };
-              vox.color = Rgb8{blend(vox.color.r, m.r), blend(vox.color.g, m.g), blend(vox.color.b, m.b)};
-            }
-            vox.weight = std::min(total, params_.max_weight);
-            any = true;
-            ++n;
           }
         }
+        if (any) block.updated = true;
       }
-      if (any) block.updated = true;
-    }
     }
     *updated = n;
   };

@@ -94,6 +94,23 @@ std::vector<v1::FrameAck> IngestResult::acks() const {
   return out;
 }
 
+::testing::AssertionResult IngestResult::everyFrameAccepted(size_t frames) const {
+  if (!status.ok()) return ::testing::AssertionFailure() << "stream: " << status.error_message();
+  const std::vector<v1::FrameAck> all = acks();
+  if (all.size() != frames) {
+    return ::testing::AssertionFailure() << all.size() << " acks for " << frames << " frames";
+  }
+  for (size_t k = 0; k < frames; ++k) {
+    if (all[k].index() != k) {
+      return ::testing::AssertionFailure() << "ack " << k << " is for frame " << all[k].index();
+    }
+    if (!all[k].accepted()) {
+      return ::testing::AssertionFailure() << "frame " << k << " rejected: " << all[k].reason();
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
 size_t IngestResult::count(v1::IngestResponse::EventCase kind) const {
   size_t n = 0;
   for (const auto& r : responses) n += r.event_case() == kind ? 1 : 0;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
 
 #include <string>
 #include <vector>
@@ -43,6 +44,9 @@ struct IngestResult {
   std::vector<v1::IngestResponse> responses;
   std::vector<v1::FrameAck> acks() const;
   size_t count(v1::IngestResponse::EventCase kind) const;
+  // Success when the stream ended OK with one ack per frame, for frames 0 .. frames − 1 in order,
+  // all accepted; else what differs first.
+  ::testing::AssertionResult everyFrameAccepted(size_t frames) const;
 };
 
 // Writes `requests`, half-closes, reads every response (on a second thread, so that the
