@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
 # Installs the Debian packages objdb needs, skipping the ones already present.
+# Extra packages may be given as arguments (scripts/peer_bench.sh: libopen3d-dev).
 # Safe to run repeatedly; a second run with everything installed takes well under a second.
 set -euo pipefail
 
@@ -12,6 +13,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   openssl
 )
+PACKAGES+=("$@")
 
 missing=()
 for p in "${PACKAGES[@]}"; do
