@@ -1,6 +1,7 @@
 #include "core/tsdf/tsdf_integrator.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -8,8 +9,163 @@
 #include <tuple>
 
 #include "absl/container/flat_hash_set.h"
+#include "core/common/simd.h"
 
 namespace objdb::tsdf {
+namespace {
+
+// floor() to int without a libm call (the x86-64 baseline has no SSE4.1 rounding): exact for
+// finite |x| < 2³¹, which every point of a validated pose and a depth ≤ 100 m is in block units.
+inline int floorToInt(float x) {
+  const int i = int(x);
+  return i - int(x < float(i));
+}
+
+// The blocks one thread's rows touch. A small direct-mapped cache of the latest blocks keeps the
+// neighbouring rays, which touch the same few blocks, away from the hash set.
+class BlockCollector {
+ public:
+  BlockCollector() { recent_.fill(BlockIndex(INT32_MIN, INT32_MIN, INT32_MIN)); }
+  void add(int x, int y, int z) {
+    const uint32_t slot =
+        (uint32_t(x) * 73856093u ^ uint32_t(y) * 19349663u ^ uint32_t(z) * 83492791u) & (kSlots - 1);
+    const BlockIndex b(x, y, z);
+    if (recent_[slot] == b) return;
+    recent_[slot] = b;
+    blocks.insert(b);
+  }
+  absl::flat_hash_set<BlockIndex, BlockIndexHash> blocks;
+  size_t invalid = 0, out_of_range = 0, used = 0;
+
+ private:
+  static constexpr uint32_t kSlots = 64;
+  std::array<BlockIndex, kSlots> recent_;
+};
+
+// Every block the segment a → b (both in block units) passes through, a's first: a 3D DDA
+// (Amanatides & Woo) that steps only along axes still short of b's block, so it ends there
+// after exactly the Manhattan distance between the two blocks.
+void touchSegment(const Eigen::Vector3f& a, const Eigen::Vector3f& b, BlockCollector* out) {
+  int at[3] = {floorToInt(a.x()), floorToInt(a.y()), floorToInt(a.z())};
+  const int end[3] = {floorToInt(b.x()), floorToInt(b.y()), floorToInt(b.z())};
+  out->add(at[0], at[1], at[2]);
+  int steps = std::abs(end[0] - at[0]) + std::abs(end[1] - at[1]) + std::abs(end[2] - at[2]);
+  if (steps == 0) return;
+  const Eigen::Vector3f d = b - a;
+  float t_next[3], t_delta[3];
+  int dir[3];
+  for (int k = 0; k < 3; ++k) {
+    dir[k] = end[k] > at[k] ? 1 : (end[k] < at[k] ? -1 : 0);
+    if (dir[k] == 0) {
+      t_next[k] = t_delta[k] = INFINITY;
+      continue;
+    }
+    const float boundary = float(dir[k] > 0 ? at[k] + 1 : at[k]);
+    t_next[k] = (boundary - a[k]) / d[k];
+    t_delta[k] = float(dir[k]) / d[k];
+  }
+  while (steps-- > 0) {
+    int k = -1;
+    for (int j = 0; j < 3; ++j) {
+      if (at[j] != end[j] && (k < 0 || t_next[j] < t_next[k])) k = j;
+    }
+    at[k] += dir[k];
+    t_next[k] += t_delta[k];
+    out->add(at[0], at[1], at[2]);
+  }
+}
+
+// What the voxel pass of one frame reads.
+struct VoxelPass {
+  const float* depth = nullptr;
+  const Rgb8* color = nullptr;  // or none
+  int w = 0, h = 0, vps = 0;
+  Eigen::Isometry3f T_cw;       // world → camera
+  float fx = 0, fy = 0, cx = 0, cy = 0, voxel = 0;
+  float trunc = 0, dropoff_start = 0, min_ray = 0, max_ray = 0, max_weight = 0;
+};
+
+constexpr int kMaxRow = 64;  // TsdfParams::voxels_per_side ≤ 64
+
+// One row of voxels along x, camera-frame centre c0 and step sx: the projection of every voxel
+// in branch-free loops (vectorised), then the update of those with a usable depth in front of
+// them. Returns the voxels updated.
+OBJDB_INLINE_KERNEL size_t integrateRow(const VoxelPass& p, const Eigen::Vector3f& c0,
+                                        const Eigen::Vector3f& sx, TsdfVoxel* row) {
+  int pixel[kMaxRow];
+  float voxel_z[kMaxRow];
+  const int n = p.vps;
+  const float w = float(p.w), h = float(p.h);
+  for (int x = 0; x < n; ++x) {
+    const float fxv = float(x);
+    const float X = c0.x() + fxv * sx.x(), Y = c0.y() + fxv * sx.y(), Z = c0.z() + fxv * sx.z();
+    // Nearest pixel: the range test on the shifted coordinate, then truncation (NaN and a voxel
+    // behind the camera fail it).
+    const float inv_z = 1.0f / Z;
+    const float fu = p.fx * X * inv_z + p.cx + 0.5f;
+    const float fv = p.fy * Y * inv_z + p.cy + 0.5f;
+    const bool inside = Z > 0.0f && fu >= 0.0f && fv >= 0.0f && fu < w && fv < h;
+    const int u = int(inside ? fu : 0.0f), v = int(inside ? fv : 0.0f);
+    pixel[x] = inside ? v * p.w + u : -1;
+    voxel_z[x] = Z;
+  }
+  size_t updated = 0;
+  for (int x = 0; x < n; ++x) {
+    if (pixel[x] < 0) continue;
+    const float d = p.depth[pixel[x]];
+    // Valid (finite, > 0) and within the ray limits: NaN and ±inf fail one of the compares.
+    if (!(d > 0.0f && d >= p.min_ray && d <= p.max_ray)) continue;
+    const float sdf = d - voxel_z[x];
+    if (sdf < -p.trunc) continue;  // hidden behind the surface: unobserved
+    float weight = 1.0f;
+    if (sdf < p.dropoff_start) weight = (p.trunc + sdf) / (p.trunc + p.dropoff_start);
+    if (!(weight > 0.0f)) continue;
+    const float clamped = std::min(sdf, p.trunc);
+    TsdfVoxel& vox = row[x];
+    const float total = vox.weight + weight;
+    vox.distance = (vox.distance * vox.weight + clamped * weight) / total;
+    if (p.color) {
+      const Rgb8 m = p.color[pixel[x]];
+      auto blend = [&](uint8_t old, uint8_t now) {
+        // Non-negative: + 0.5 and truncation round to nearest (lround is a libm call).
+        return uint8_t((float(old) * vox.weight + float(now) * weight) / total + 0.5f);
+      };
+      vox.color = Rgb8{blend(vox.color.r, m.r), blend(vox.color.g, m.g), blend(vox.color.b, m.b)};
+    }
+    vox.weight = std::min(total, p.max_weight);
+    ++updated;
+  }
+  return updated;
+}
+
+// Every voxel of blocks [first, last): project, compare with the measured depth, fuse.
+OBJDB_VECTOR_CLONES
+size_t integrateBlocks(const VoxelPass& p, TsdfBlock* const* blocks, const BlockIndex* indices,
+                       size_t first, size_t last) {
+  size_t updated = 0;
+  const int vps = p.vps;
+  // Voxel centres in the camera frame: a row's first centre, then one step along x per voxel.
+  const Eigen::Vector3f sx = p.T_cw.linear() * Eigen::Vector3f(p.voxel, 0.0f, 0.0f);
+  for (size_t k = first; k < last; ++k) {
+    TsdfBlock& block = *blocks[k];
+    const Eigen::Vector3i base = indices[k] * vps;
+    size_t in_block = 0;
+    for (int z = 0; z < vps; ++z) {
+      for (int y = 0; y < vps; ++y) {
+        const Eigen::Vector3f centre =
+            (Eigen::Vector3i(base.x(), base.y() + y, base.z() + z).cast<float>() +
+             Eigen::Vector3f::Constant(0.5f)) * p.voxel;
+        in_block += integrateRow(p, p.T_cw * centre, sx,
+                                 &block.voxel(size_t(vps) * (size_t(y) + size_t(vps) * size_t(z))));
+      }
+    }
+    if (in_block) block.updated = true;
+    updated += in_block;
+  }
+  return updated;
+}
+
+}  // namespace
 
 StatusOr<TsdfIntegrator> TsdfIntegrator::create(const TsdfParams& params,
                                                 const Intrinsics& intrinsics, int threads) {
@@ -49,61 +205,50 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   const float cx = float(intrinsics_.cx), cy = float(intrinsics_.cy);
   const int w = depth.width, h = depth.height;
 
-  // 1. Blocks within the truncation band of the measured points, bundled per block. Allocation
-  // looks at every other pixel in both directions: at the longest ray (3.5 m at VGA) neighbouring
-  // samples are ~1.3 cm apart, far below a block (16 cm), so no block of the band is missed except
-  // slivers thinner than that spacing. Along each ray the band is sampled every voxel. The rows
+  // 1. Blocks within the truncation band of the measured points. Allocation looks at every other
+  // pixel in both directions: at the longest ray (3.5 m at VGA) neighbouring samples are ~1.3 cm
+  // apart, far below a block (16 cm), so no block of the band is missed except slivers thinner
+  // than that spacing. Each ray's band [−truncation, +truncation] around its point is walked
+  // block by block; every 4th pixel each way also walks the free space in front of the band up
+  // to carve_distance_m (the samples of neighbouring rays are far closer than a block). The rows
   // are split over the threads, each with its own set; the sets are merged in thread order.
   const Eigen::Vector3f origin = T_wc.translation();
-  const float step = layer->voxelSize();
   const float carve = params_.carve_distance_m;
-  const float carve_step = 0.5f * layer->voxelSize() * float(layer->voxelsPerSide());
-  struct RowsResult {
-    absl::flat_hash_set<BlockIndex, BlockIndexHash> touched;
-    size_t invalid = 0, out_of_range = 0, used = 0;
-  };
-  auto touch_rows = [&](int v_begin, int v_end, RowsResult* out) {
-    BlockIndex last(INT32_MIN, INT32_MIN, INT32_MIN);
-    auto touch = [&](const BlockIndex& b) {
-      if (b != last) {
-        out->touched.insert(b);
-        last = b;
-      }
-    };
+  const float inv_block = 1.0f / (layer->voxelSize() * float(layer->voxelsPerSide()));
+  const float min_ray = params_.min_ray_length_m, max_ray = params_.max_ray_length_m;
+  auto touch_rows = [&](int v_begin, int v_end, BlockCollector* out) {
+    size_t invalid = 0, out_of_range = 0, used = 0;  // local: the collectors share cache lines
     for (int v = v_begin; v < v_end; ++v) {
+      const float* row = depth.data.data() + size_t(v) * size_t(w);
       for (int u = 0; u < w; ++u) {
-        const float z = depth.data[size_t(v) * w + u];
+        const float z = row[u];
         if (!isValidDepth(z)) {
-          ++out->invalid;
+          ++invalid;
           continue;
         }
-        if (!(z >= params_.min_ray_length_m && z <= params_.max_ray_length_m)) {
-          ++out->out_of_range;
+        if (!(z >= min_ray && z <= max_ray)) {
+          ++out_of_range;
           continue;
         }
-        ++out->used;
+        ++used;
         if ((u | v) & 1) continue;
         const Eigen::Vector3f p =
             T_wc * Eigen::Vector3f((float(u) - cx) * z / fx, (float(v) - cy) * z / fy, z);
-        const Eigen::Vector3f ray = (p - origin).normalized();
-        for (float s = -trunc; s <= trunc + 1e-6f; s += step) touch(layer->blockIndexOf(p + s * ray));
-        // Free space in front of the band (every 4th pixel each way, half-block steps: the
-        // samples of neighbouring rays are far closer than a block).
+        const float range = (p - origin).norm();
+        const Eigen::Vector3f ray = (p - origin) / range;
+        float front = trunc;  // how far toward the camera the walk goes
         if (carve > 0.0f && ((u | v) & 3) == 0) {
-          const float reach =
-              std::min(trunc + carve, (p - origin).norm() - params_.min_ray_length_m);
-          const int samples = int(std::ceil(carve / carve_step));
-          for (int k = 1; k <= samples; ++k) {
-            const float s = trunc + std::min(float(k) * carve_step, carve);
-            if (s > reach) break;
-            touch(layer->blockIndexOf(p - s * ray));
-          }
+          front = std::max(trunc, std::min(trunc + carve, range - min_ray));
         }
+        touchSegment((p + trunc * ray) * inv_block, (p - front * ray) * inv_block, out);
       }
     }
+    out->invalid = invalid;
+    out->out_of_range = out_of_range;
+    out->used = used;
   };
   const size_t row_threads = std::min<size_t>(size_t(threads_), size_t(h));
-  std::vector<RowsResult> rows(row_threads);
+  std::vector<BlockCollector> rows(row_threads);
   {
     // The sampling above looks at absolute rows: the same samples for any thread count.
     auto row_of = [&](size_t t) { return int(size_t(h) * t / row_threads); };
@@ -114,12 +259,12 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
     touch_rows(row_of(0), row_of(1), &rows[0]);  // this thread works too
     for (auto& worker : workers) worker.join();
   }
-  absl::flat_hash_set<BlockIndex, BlockIndexHash>& touched = rows[0].touched;
+  absl::flat_hash_set<BlockIndex, BlockIndexHash>& touched = rows[0].blocks;
   for (size_t t = 0; t < row_threads; ++t) {
     stats.invalid_depth += rows[t].invalid;
     stats.out_of_range += rows[t].out_of_range;
     stats.points_used += rows[t].used;
-    if (t > 0) touched.insert(rows[t].touched.begin(), rows[t].touched.end());
+    if (t > 0) touched.insert(rows[t].blocks.begin(), rows[t].blocks.end());
   }
   // Allocated in index order: the layer's state does not depend on the thread count.
   std::vector<BlockIndex> indices(touched.begin(), touched.end());
@@ -131,78 +276,43 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   for (const BlockIndex& b : indices) blocks.push_back(&layer->allocateBlock(b));
   stats.blocks_touched = blocks.size();
 
-  // 2. Every voxel of those blocks: project, compare with the measured depth, fuse.
-  const Eigen::Isometry3f T_cw = T_wc.inverse();
-  const int vps = layer->voxelsPerSide();
-  const float voxel = layer->voxelSize();
-  const float dropoff_start = -voxel;
-  // Blocks are handed out in small chunks from a shared counter: blocks differ in cost (a
-  // surface block against one carved in free space), so fixed halves leave a thread idle.
+  // 2. Every voxel of those blocks: project, compare with the measured depth, fuse. Blocks are
+  // handed out in small chunks from a shared counter: blocks differ in cost (a surface block
+  // against one carved in free space), so fixed halves leave a thread idle.
+  VoxelPass pass;
+  pass.depth = depth.data.data();
+  pass.color = color ? color->data.data() : nullptr;
+  pass.w = w;
+  pass.h = h;
+  pass.vps = layer->voxelsPerSide();
+  pass.T_cw = T_wc.inverse();
+  pass.fx = fx;
+  pass.fy = fy;
+  pass.cx = cx;
+  pass.cy = cy;
+  pass.voxel = layer->voxelSize();
+  pass.trunc = trunc;
+  pass.dropoff_start = -pass.voxel;
+  pass.min_ray = min_ray;
+  pass.max_ray = max_ray;
+  pass.max_weight = params_.max_weight;
   constexpr size_t kChunk = 8;
   std::atomic<size_t> next_block{0};
-  auto integrate_blocks = [&](size_t* updated) {
+  auto integrate_chunks = [&](size_t* updated) {
     size_t n = 0;
     for (size_t first = next_block.fetch_add(kChunk); first < blocks.size();
          first = next_block.fetch_add(kChunk)) {
-      const size_t last_block = std::min(blocks.size(), first + kChunk);
-      for (size_t k = first; k < last_block; ++k) {
-        TsdfBlock& block = *blocks[k];
-        const Eigen::Vector3i base = indices[k] * vps;
-        bool any = false;
-        // Voxel centres in the camera frame, stepped along x: one add per voxel.
-        const Eigen::Vector3f step_x = T_cw.linear() * Eigen::Vector3f(voxel, 0.0f, 0.0f);
-        for (int z = 0; z < vps; ++z) {
-          for (int y = 0; y < vps; ++y) {
-            Eigen::Vector3f c = T_cw * layer->voxelCenter(base + Eigen::Vector3i(0, y, z)) - step_x;
-            for (int x = 0; x < vps; ++x) {
-              c += step_x;
-              if (!(c.z() > 0.0f)) continue;
-              // Nearest pixel: the range test on the shifted coordinate first, then truncation
-              // (cheaper than lround, and NaN fails the test).
-              const float fu = fx * c.x() / c.z() + cx + 0.5f;
-              const float fv = fy * c.y() / c.z() + cy + 0.5f;
-              if (!(fu >= 0.0f && fv >= 0.0f && fu < float(w) && fv < float(h))) continue;
-              const int u = int(fu), v = int(fv);
-              const float d = depth.data[size_t(v) * w + u];
-              if (!(isValidDepth(d) && d >= params_.min_ray_length_m && d <= params_.max_ray_length_m)) {
-                continue;
-              }
-              const float sdf = d - c.z();
-              if (sdf < -trunc) continue;  // hidden behind the surface: unobserved
-              float weight = 1.0f;
-              if (sdf < dropoff_start) weight *= (trunc + sdf) / (trunc + dropoff_start);
-              if (!(weight > 0.0f)) continue;
-              const float clamped = std::min(sdf, trunc);
-              TsdfVoxel& vox = block.voxel(size_t(x) + size_t(vps) * (size_t(y) + size_t(vps) * size_t(z)));
-              const float total = vox.weight + weight;
-              vox.distance = (vox.distance * vox.weight + clamped * weight) / total;
-              if (color) {
-                const Rgb8 m = color->data[size_t(v) * w + u];
-                auto blend = [&](uint8_t old, uint8_t now) {
-                  // Non-negative: + 0.5 and truncation round to nearest (lround is a libm call).
-                  return uint8_t((float(old) * vox.weight + float(now) * weight) / total + 0.5f);
-                };
-                vox.color = Rgb8{blend(vox.color.r, m.r), blend(vox.color.g, m.g), blend(vox.color.b, m.b)};
-              }
-              vox.weight = std::min(total, params_.max_weight);
-              any = true;
-              ++n;
-            }
-          }
-        }
-        if (any) block.updated = true;
-      }
+      n += integrateBlocks(pass, blocks.data(), indices.data(), first,
+                           std::min(blocks.size(), first + kChunk));
     }
     *updated = n;
   };
   const size_t n_threads = std::min<size_t>(size_t(threads_), std::max<size_t>(1, blocks.size()));
   std::vector<size_t> updated(n_threads, 0);
-  if (n_threads == 1) {
-    integrate_blocks(&updated[0]);
-  } else {
+  {
     std::vector<std::thread> workers;
-    for (size_t t = 1; t < n_threads; ++t) workers.emplace_back(integrate_blocks, &updated[t]);
-    integrate_blocks(&updated[0]);  // this thread works too
+    for (size_t t = 1; t < n_threads; ++t) workers.emplace_back(integrate_chunks, &updated[t]);
+    integrate_chunks(&updated[0]);  // this thread works too
     for (auto& worker : workers) worker.join();
   }
   for (size_t n : updated) stats.voxels_updated += n;
