@@ -211,7 +211,7 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   // than that spacing. Each ray's band [−truncation, +truncation] around its point is walked
   // block by block; every 4th pixel each way also walks the free space in front of the band up
   // to carve_distance_m (the samples of neighbouring rays are far closer than a block). The rows
-  // are split over the threads, each with its own set; the sets are merged in thread order.
+  // are shared out between the threads, each with its own set; the sets are merged.
   const Eigen::Vector3f origin = T_wc.translation();
   const float carve = params_.carve_distance_m;
   const float inv_block = 1.0f / (layer->voxelSize() * float(layer->voxelsPerSide()));
@@ -243,20 +243,26 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
         touchSegment((p + trunc * ray) * inv_block, (p - front * ray) * inv_block, out);
       }
     }
-    out->invalid = invalid;
-    out->out_of_range = out_of_range;
-    out->used = used;
+    out->invalid += invalid;
+    out->out_of_range += out_of_range;
+    out->used += used;
   };
   const size_t row_threads = std::min<size_t>(size_t(threads_), size_t(h));
   std::vector<BlockCollector> rows(row_threads);
   {
-    // The sampling above looks at absolute rows: the same samples for any thread count.
-    auto row_of = [&](size_t t) { return int(size_t(h) * t / row_threads); };
+    // Rows are handed out in chunks from a shared counter (the floor near the camera costs more
+    // than a window); the sampling above looks at absolute rows, so the blocks are the same for
+    // any thread count.
+    constexpr int kRowChunk = 16;
+    std::atomic<int> next_row{0};
+    auto collect = [&](BlockCollector* out) {
+      for (int v = next_row.fetch_add(kRowChunk); v < h; v = next_row.fetch_add(kRowChunk)) {
+        touch_rows(v, std::min(h, v + kRowChunk), out);
+      }
+    };
     std::vector<std::thread> workers;
-    for (size_t t = 1; t < row_threads; ++t) {
-      workers.emplace_back(touch_rows, row_of(t), row_of(t + 1), &rows[t]);
-    }
-    touch_rows(row_of(0), row_of(1), &rows[0]);  // this thread works too
+    for (size_t t = 1; t < row_threads; ++t) workers.emplace_back(collect, &rows[t]);
+    collect(&rows[0]);  // this thread works too
     for (auto& worker : workers) worker.join();
   }
   absl::flat_hash_set<BlockIndex, BlockIndexHash>& touched = rows[0].blocks;
@@ -266,14 +272,23 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
     stats.points_used += rows[t].used;
     if (t > 0) touched.insert(rows[t].blocks.begin(), rows[t].blocks.end());
   }
-  // Allocated in index order: the layer's state does not depend on the thread count.
-  std::vector<BlockIndex> indices(touched.begin(), touched.end());
-  std::sort(indices.begin(), indices.end(), [](const BlockIndex& a, const BlockIndex& b) {
-    return std::tie(a.z(), a.y(), a.x()) < std::tie(b.z(), b.y(), b.x());
-  });
-  std::vector<TsdfBlock*> blocks;
-  blocks.reserve(indices.size());
-  for (const BlockIndex& b : indices) blocks.push_back(&layer->allocateBlock(b));
+  // Allocated in index order (z, y, x): the layer's state does not depend on the thread count.
+  // Sorted as one 64-bit key each (21 bits per axis, offset to non-negative), which orders them
+  // as the index tuples do while |index| < 2²⁰ blocks (≥ 20 km at 2 cm voxels).
+  auto key = [](const BlockIndex& b) {
+    constexpr int64_t kOffset = int64_t(1) << 20;
+    return (uint64_t(b.z() + kOffset) << 42) | (uint64_t(b.y() + kOffset) << 21) |
+           uint64_t(b.x() + kOffset);
+  };
+  std::vector<std::pair<uint64_t, BlockIndex>> keyed;
+  keyed.reserve(touched.size());
+  for (const BlockIndex& b : touched) keyed.emplace_back(key(b), b);
+  std::sort(keyed.begin(), keyed.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<BlockIndex> indices;
+  indices.reserve(keyed.size());
+  for (const auto& [k, b] : keyed) indices.push_back(b);
+  const std::vector<TsdfBlock*> blocks = layer->allocateBlocks(indices, threads_);
   stats.blocks_touched = blocks.size();
 
   // 2. Every voxel of those blocks: project, compare with the measured depth, fuse. Blocks are

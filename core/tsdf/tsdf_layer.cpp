@@ -1,7 +1,9 @@
 #include "core/tsdf/tsdf_layer.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <thread>
 
 namespace objdb::tsdf {
 namespace {
@@ -65,6 +67,42 @@ TsdfBlock& TsdfLayer::allocateBlock(const BlockIndex& b) {
     return *slot;
   }
   return *unshare(&slot);
+}
+
+std::vector<TsdfBlock*> TsdfLayer::allocateBlocks(const std::vector<BlockIndex>& indices,
+                                                  int threads) {
+  // Room for every index first: the inserts below then never rehash, so the slots' addresses
+  // stay valid and each slot is written by one thread only.
+  blocks_.reserve(blocks_.size() + indices.size());
+  std::vector<TsdfBlock*> out(indices.size(), nullptr);
+  std::vector<std::shared_ptr<TsdfBlock>*> pending;  // new, or shared with a snapshot
+  std::vector<size_t> pending_at;
+  for (size_t k = 0; k < indices.size(); ++k) {
+    std::shared_ptr<TsdfBlock>& slot = blocks_.try_emplace(indices[k]).first->second;
+    if (slot && slot.use_count() == 1) {
+      std::atomic_thread_fence(std::memory_order_acquire);  // as unshare()
+      out[k] = slot.get();
+    } else {
+      pending.push_back(&slot);
+      pending_at.push_back(k);
+    }
+  }
+  auto fill = [&](size_t begin, size_t end) {
+    for (size_t i = begin; i < end; ++i) {
+      std::shared_ptr<TsdfBlock>& slot = *pending[i];
+      if (!slot) slot = std::make_shared<TsdfBlock>(vps_);
+      out[pending_at[i]] = unshare(&slot);
+    }
+  };
+  // Threads only for enough memory to be worth one (a block is a few kB to a few hundred kB).
+  const size_t n = std::clamp<size_t>(pending.size() / 32, 1, size_t(std::max(threads, 1)));
+  std::vector<std::thread> workers;
+  for (size_t t = 1; t < n; ++t) {
+    workers.emplace_back(fill, pending.size() * t / n, pending.size() * (t + 1) / n);
+  }
+  fill(0, pending.size() / n);  // this thread works too
+  for (auto& worker : workers) worker.join();
+  return out;
 }
 
 const TsdfVoxel* TsdfLayer::voxel(const VoxelIndex& v) const {

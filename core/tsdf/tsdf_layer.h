@@ -75,6 +75,11 @@ class TsdfLayer {
   TsdfBlock* block(const BlockIndex& b);
   const TsdfBlock* block(const BlockIndex& b) const;
   TsdfBlock& allocateBlock(const BlockIndex& b);
+  // allocateBlock for every index (no duplicates), the blocks in the same order. The map grows on
+  // the calling thread; new blocks are created (zeroed) and blocks shared with a snapshot are
+  // copied on `threads` threads, so a frame's fresh or just-snapshotted blocks do not cost serial
+  // memory traffic.
+  std::vector<TsdfBlock*> allocateBlocks(const std::vector<BlockIndex>& indices, int threads);
   const TsdfVoxel* voxel(const VoxelIndex& v) const;
   TsdfVoxel* voxel(const VoxelIndex& v);
 

@@ -109,6 +109,35 @@ TEST(TsdfLayer, ASnapshotSharesBlocksAndNeverSeesLaterWrites) {
   EXPECT_EQ(&*layer.blocks().at(BlockIndex(0, 0, 0)), before);
 }
 
+TEST(TsdfLayer, AllocateBlocksCreatesCopiesSharedAndKeepsOwnBlocksOnAnyThreadCount) {
+  for (int threads : {1, 2, 4}) {
+    TsdfLayer layer = TsdfLayer::create(0.1f, 4).value();
+    // 200 blocks before the snapshot (enough for the threads to be used), 100 only after it.
+    for (int x = 0; x < 200; ++x) layer.allocateBlock({x, 1, 0}).voxel(0).distance = float(x);
+    const TsdfLayer snap = layer.snapshot();
+    layer.allocateBlock({0, 1, 0});  // unshared again before the batch: written in place below
+    const TsdfBlock* own = &*layer.blocks().at(BlockIndex(0, 1, 0));
+    std::vector<BlockIndex> indices;
+    for (int x = 0; x < 300; ++x) indices.emplace_back(x, 1, 0);
+    const std::vector<TsdfBlock*> blocks = layer.allocateBlocks(indices, threads);
+    ASSERT_EQ(blocks.size(), indices.size());
+    EXPECT_EQ(layer.numBlocks(), 300u);
+    EXPECT_EQ(layer.numSharedBlocks(), 0u) << threads;
+    EXPECT_EQ(blocks[0], own);
+    for (int x = 0; x < 300; ++x) {
+      ASSERT_EQ(blocks[size_t(x)], layer.block(indices[size_t(x)])) << x;
+      // Copies keep the values; new blocks are unobserved.
+      ASSERT_EQ(blocks[size_t(x)]->voxel(0).distance, x < 200 ? float(x) : 0.0f) << x;
+      ASSERT_EQ(blocks[size_t(x)]->voxel(0).weight, 0.0f);
+      blocks[size_t(x)]->voxel(0).distance = -1.0f;
+    }
+    for (int x = 1; x < 200; ++x) {
+      ASSERT_EQ(snap.block({x, 1, 0})->voxel(0).distance, float(x)) << "snapshot changed at " << x;
+    }
+    EXPECT_EQ(snap.block({250, 1, 0}), nullptr);
+  }
+}
+
 TEST(TsdfLayer, ASnapshotReadOnAnotherThreadKeepsItsValuesWhileTheLayerIsWritten) {
   TsdfLayer layer = TsdfLayer::create(0.1f, 8).value();
   for (int x = 0; x < 64; ++x) {
