@@ -6,7 +6,6 @@
 #include <chrono>
 #include <cmath>
 #include <thread>
-#include <tuple>
 
 #include "absl/container/flat_hash_set.h"
 #include "core/common/simd.h"
@@ -27,9 +26,8 @@ class BlockCollector {
  public:
   BlockCollector() { recent_.fill(BlockIndex(INT32_MIN, INT32_MIN, INT32_MIN)); }
   void add(int x, int y, int z) {
-    const uint32_t slot =
-        (uint32_t(x) * 73856093u ^ uint32_t(y) * 19349663u ^ uint32_t(z) * 83492791u) & (kSlots - 1);
     const BlockIndex b(x, y, z);
+    const size_t slot = BlockIndexHash{}(b) & (kSlots - 1);
     if (recent_[slot] == b) return;
     recent_[slot] = b;
     blocks.insert(b);
@@ -38,7 +36,7 @@ class BlockCollector {
   size_t invalid = 0, out_of_range = 0, used = 0;
 
  private:
-  static constexpr uint32_t kSlots = 64;
+  static constexpr size_t kSlots = 64;
   std::array<BlockIndex, kSlots> recent_;
 };
 
@@ -77,11 +75,12 @@ void touchSegment(const Eigen::Vector3f& a, const Eigen::Vector3f& b, BlockColle
 
 // What the voxel pass of one frame reads.
 struct VoxelPass {
+  const TsdfLayer* layer = nullptr;  // voxel size, block side, voxel centres
   const float* depth = nullptr;
   const Rgb8* color = nullptr;  // or none
-  int w = 0, h = 0, vps = 0;
+  int w = 0, h = 0;
   Eigen::Isometry3f T_cw;       // world → camera
-  float fx = 0, fy = 0, cx = 0, cy = 0, voxel = 0;
+  float fx = 0, fy = 0, cx = 0, cy = 0;
   float trunc = 0, dropoff_start = 0, min_ray = 0, max_ray = 0, max_weight = 0;
 };
 
@@ -94,7 +93,7 @@ OBJDB_INLINE_KERNEL size_t integrateRow(const VoxelPass& p, const Eigen::Vector3
                                         const Eigen::Vector3f& sx, TsdfVoxel* row) {
   int pixel[kMaxRow];
   float voxel_z[kMaxRow];
-  const int n = p.vps;
+  const int n = p.layer->voxelsPerSide();
   const float w = float(p.w), h = float(p.h);
   for (int x = 0; x < n; ++x) {
     const float fxv = float(x);
@@ -143,18 +142,16 @@ OBJDB_VECTOR_CLONES
 size_t integrateBlocks(const VoxelPass& p, TsdfBlock* const* blocks, const BlockIndex* indices,
                        size_t first, size_t last) {
   size_t updated = 0;
-  const int vps = p.vps;
+  const int vps = p.layer->voxelsPerSide();
   // Voxel centres in the camera frame: a row's first centre, then one step along x per voxel.
-  const Eigen::Vector3f sx = p.T_cw.linear() * Eigen::Vector3f(p.voxel, 0.0f, 0.0f);
+  const Eigen::Vector3f sx = p.T_cw.linear() * Eigen::Vector3f(p.layer->voxelSize(), 0.0f, 0.0f);
   for (size_t k = first; k < last; ++k) {
     TsdfBlock& block = *blocks[k];
     const Eigen::Vector3i base = indices[k] * vps;
     size_t in_block = 0;
     for (int z = 0; z < vps; ++z) {
       for (int y = 0; y < vps; ++y) {
-        const Eigen::Vector3f centre =
-            (Eigen::Vector3i(base.x(), base.y() + y, base.z() + z).cast<float>() +
-             Eigen::Vector3f::Constant(0.5f)) * p.voxel;
+        const Eigen::Vector3f centre = p.layer->voxelCenter(base + Eigen::Vector3i(0, y, z));
         in_block += integrateRow(p, p.T_cw * centre, sx,
                                  &block.voxel(size_t(vps) * (size_t(y) + size_t(vps) * size_t(z))));
       }
@@ -297,17 +294,16 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   VoxelPass pass;
   pass.depth = depth.data.data();
   pass.color = color ? color->data.data() : nullptr;
+  pass.layer = layer;
   pass.w = w;
   pass.h = h;
-  pass.vps = layer->voxelsPerSide();
   pass.T_cw = T_wc.inverse();
   pass.fx = fx;
   pass.fy = fy;
   pass.cx = cx;
   pass.cy = cy;
-  pass.voxel = layer->voxelSize();
   pass.trunc = trunc;
-  pass.dropoff_start = -pass.voxel;
+  pass.dropoff_start = -layer->voxelSize();
   pass.min_ray = min_ray;
   pass.max_ray = max_ray;
   pass.max_weight = params_.max_weight;

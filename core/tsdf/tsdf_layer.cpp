@@ -80,8 +80,7 @@ std::vector<TsdfBlock*> TsdfLayer::allocateBlocks(const std::vector<BlockIndex>&
   for (size_t k = 0; k < indices.size(); ++k) {
     std::shared_ptr<TsdfBlock>& slot = blocks_.try_emplace(indices[k]).first->second;
     if (slot && slot.use_count() == 1) {
-      std::atomic_thread_fence(std::memory_order_acquire);  // as unshare()
-      out[k] = slot.get();
+      out[k] = unshare(&slot);  // its own block: no copy
     } else {
       pending.push_back(&slot);
       pending_at.push_back(k);
