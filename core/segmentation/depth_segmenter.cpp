@@ -41,41 +41,87 @@ void resize(Image<T>* image, int w, int h, T fill) {
 
 }  // namespace
 
+namespace {
+
+// A depth is a measurement when positive and finite; NaN fails both comparisons (branch-free).
+inline bool measured(float d) {
+  return (d > 0.0f) & (d < std::numeric_limits<float>::infinity());
+}
+
+// One pass of hole filling over the interior of row v: out = the row of `in` (measured depths,
+// 0 elsewhere), except that an unmeasured pixel with ≥ 5 measured 3 × 3 neighbours whose depths
+// spread ≤ `spread` · their minimum takes their mean; other unmeasured pixels keep `keep`'s value.
+// The taps are summed in the same row-major order as a scalar loop would: bit-identical.
+// Returns the number of pixels filled.
+OBJDB_INLINE_KERNEL int fillRow(const float* __restrict in, const float* __restrict keep,
+                                float* __restrict out, size_t row, int w, float spread) {
+  const size_t ws = size_t(w);
+  const float* __restrict a = in + row - ws;
+  const float* __restrict b = in + row;
+  const float* __restrict c = in + row + ws;
+  const float* __restrict k = keep + row;
+  float* __restrict o = out + row;
+  int filled = 0;
+  for (size_t u = 1; u + 1 < ws; ++u) {
+    float sum = 0.0f, lo = std::numeric_limits<float>::max(), hi = 0.0f, n = 0.0f;
+    const auto tap = [&](float t) {
+      const bool m = t > 0.0f;
+      sum += m ? t : 0.0f;
+      n += m ? 1.0f : 0.0f;
+      lo = m & (t < lo) ? t : lo;  // values, not std::min's references: no branch
+      hi = t > hi ? t : hi;
+    };
+    tap(a[u - 1]), tap(a[u]), tap(a[u + 1]);
+    tap(b[u - 1]), tap(b[u]), tap(b[u + 1]);
+    tap(c[u - 1]), tap(c[u]), tap(c[u + 1]);
+    const bool fill = (b[u] == 0.0f) & (n >= 5.0f) & (hi - lo <= spread * lo);
+    const float mean = sum / (n > 1.0f ? n : 1.0f);
+    o[u] = fill ? mean : (b[u] > 0.0f ? b[u] : k[u]);
+    filled += fill ? 1 : 0;
+  }
+  return filled;
+}
+
+// Hole filling on `clean` (measured depths, 0 elsewhere) in place, up to `iterations` passes;
+// unmeasured pixels that stay unfilled take `keep`'s value in the last pass (null: `clean`'s).
+// `scratch` is reused between calls.
 OBJDB_VECTOR_CLONES
-size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spread) {
-  const int w = depth->width, h = depth->height;
+size_t fillHoles(float* clean, const float* keep, int w, int h, int iterations, float spread,
+                 std::vector<float>* scratch) {
+  if (w < 3 || h < 3) return 0;
+  const size_t n = size_t(w) * size_t(h), ws = size_t(w);
+  scratch->resize(n);
   size_t filled = 0;
-  DepthImage next = *depth;
   for (int it = 0; it < iterations; ++it) {
-    size_t filled_now = 0;
+    float* out = scratch->data();
+    std::copy(clean, clean + ws, out);
+    std::copy(clean + n - ws, clean + n, out + n - ws);
+    int filled_now = 0;
     for (int v = 1; v + 1 < h; ++v) {
-      for (int u = 1; u + 1 < w; ++u) {
-        if (isValidDepth(depth->at(u, v))) continue;
-        float sum = 0.0f, lo = std::numeric_limits<float>::max(), hi = 0.0f;
-        int n = 0;
-        for (int dv = -1; dv <= 1; ++dv) {
-          for (int du = -1; du <= 1; ++du) {
-            const float d = depth->at(u + du, v + dv);
-            if (isValidDepth(d)) {
-              sum += d;
-              lo = std::min(lo, d);
-              hi = std::max(hi, d);
-              ++n;
-            }
-          }
-        }
-        // Only holes surrounded on most sides (never growing the image outward at its borders)
-        // by pixels on one surface: a hole on a depth edge stays a hole.
-        if (n >= 5 && hi - lo <= max_relative_spread * lo) {
-          next.at(u, v) = sum / float(n);
-          ++filled_now;
-        }
-      }
+      const size_t row = size_t(v) * ws;
+      out[row] = clean[row];
+      out[row + ws - 1] = clean[row + ws - 1];
+      filled_now += fillRow(clean, clean, out, row, w, spread);
     }
     if (filled_now == 0) break;
-    filled += filled_now;
-    *depth = next;
+    filled += size_t(filled_now);
+    std::copy(out, out + n, clean);
   }
+  if (keep != nullptr) {
+    for (size_t i = 0; i < n; ++i) clean[i] = clean[i] > 0.0f ? clean[i] : keep[i];
+  }
+  return filled;
+}
+
+}  // namespace
+
+size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spread) {
+  const size_t n = depth->data.size();
+  std::vector<float> clean(n), scratch;
+  for (size_t i = 0; i < n; ++i) clean[i] = measured(depth->data[i]) ? depth->data[i] : 0.0f;
+  const size_t filled = fillHoles(clean.data(), depth->data.data(), depth->width, depth->height,
+                                  iterations, max_relative_spread, &scratch);
+  depth->data.swap(clean);
   return filled;
 }
 
@@ -100,31 +146,59 @@ void depthToPoints(const DepthImage& depth, const Intrinsics& k, PointImage* poi
   }
 }
 
+// Largest jump to a measured neighbour = max(max_window(d) − d, d − min_window(d)), holes
+// excluded from both (0 never wins a max, +inf never wins a min): holes are not edges. The
+// window's max and min are separable and exact: down the columns into a row buffer padded by
+// the radius (so that the row taps need no bounds), then along it.
+OBJDB_VECTOR_CLONES
 void discontinuityMap(const DepthImage& depth, int window, float threshold, MaskImage* edges) {
-  const int w = depth.width, h = depth.height;
+  const int w = depth.width, h = depth.height, r = std::max(0, window / 2);
   resize(edges, w, h, uint8_t{0});
-  // Largest jump to a measured neighbour = max(dilate(d) − d, d − erode(d)), with holes
-  // excluded from both (0 never wins a max, +inf never wins a min): holes are not edges.
-  thread_local cv::Mat clean, for_min, dilated, eroded;
-  clean.create(h, w, CV_32F);
-  for_min.create(h, w, CV_32F);
-  float* c = clean.ptr<float>();
-  float* m = for_min.ptr<float>();
   const float kInf = std::numeric_limits<float>::infinity();
-  for (size_t i = 0; i < depth.data.size(); ++i) {
-    const bool valid = isValidDepth(depth.data[i]);
-    c[i] = valid ? depth.data[i] : 0.0f;
-    m[i] = valid ? depth.data[i] : kInf;
-  }
-  const cv::Mat kernel = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(window, window));
-  cv::dilate(clean, dilated, kernel, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(0));
-  cv::erode(for_min, eroded, kernel, cv::Point(-1, -1), 1, cv::BORDER_CONSTANT, cv::Scalar(kInf));
-  const float* hi = dilated.ptr<float>();
-  const float* lo = eroded.ptr<float>();
-  for (size_t i = 0; i < depth.data.size(); ++i) {
-    const float z = c[i];
-    const float jump = std::max(hi[i] - z, z - lo[i]);
-    edges->data[i] = uint8_t(z > 0.0f && jump > threshold * z);
+  const size_t ws = size_t(w), padded = ws + 2 * size_t(r);
+  thread_local std::vector<float> col_hi, col_lo, row_hi, row_lo;
+  col_hi.assign(padded, 0.0f);
+  col_lo.assign(padded, kInf);
+  row_hi.resize(ws);
+  row_lo.resize(ws);
+  const float* __restrict d = depth.data.data();
+  for (int v = 0; v < h; ++v) {
+    float* __restrict chi = col_hi.data() + r;
+    float* __restrict clo = col_lo.data() + r;
+    std::fill(chi, chi + ws, 0.0f);
+    std::fill(clo, clo + ws, kInf);
+    for (int k = std::max(0, v - r); k <= std::min(h - 1, v + r); ++k) {
+      const float* __restrict row = d + size_t(k) * ws;
+      for (size_t u = 0; u < ws; ++u) {
+        // Chained selects (NaN and −inf fail t > 0, +inf fails t < inf): they vectorise.
+        float t = row[u] > 0.0f ? row[u] : 0.0f;
+        t = t < kInf ? t : 0.0f;
+        chi[u] = std::max(chi[u], t);
+        clo[u] = std::min(clo[u], t > 0.0f ? t : kInf);
+      }
+    }
+    float* __restrict rhi = row_hi.data();
+    float* __restrict rlo = row_lo.data();
+    std::copy(chi - r, chi - r + ws, rhi);
+    std::copy(clo - r, clo - r + ws, rlo);
+    for (int t = 1 - r; t <= r; ++t) {
+      const float* __restrict shi = chi + t;
+      const float* __restrict slo = clo + t;
+      for (size_t u = 0; u < ws; ++u) {
+        rhi[u] = std::max(rhi[u], shi[u]);
+        rlo[u] = std::min(rlo[u], slo[u]);
+      }
+    }
+    const float* __restrict zr = d + size_t(v) * ws;
+    for (size_t u = 0; u < ws; ++u) {  // the edge flag as 0 / 1 in rhi, then packed to bytes
+      float z = zr[u] > 0.0f ? zr[u] : 0.0f;
+      z = z < kInf ? z : 0.0f;
+      const float jump = std::max(rhi[u] - z, z - rlo[u]);
+      const float flag = jump > threshold * z ? 1.0f : 0.0f;
+      rhi[u] = z > 0.0f ? flag : 0.0f;
+    }
+    uint8_t* __restrict e = edges->data.data() + size_t(v) * ws;
+    for (size_t u = 0; u < ws; ++u) e[u] = uint8_t(rhi[u]);
   }
 }
 
@@ -174,70 +248,94 @@ OBJDB_INLINE_KERNEL void accumulateSameSurface(const float* __restrict zc,
 // across a jump is excluded too: the row sum it belongs to is either of a pixel across the jump
 // (left out) or of a pixel on this surface, which left it out — for jumps above about twice the
 // threshold (the test is relative to each centre pixel, so it is not transitive below that). Direct sums over the window
-// (2 × 5 taps at VGA), every loop branch-free so that it vectorises.
+// (2 × 5 taps at VGA), every loop branch-free so that it vectorises. Streamed: the row sums of
+// the last `window` rows live in a ring buffer that stays in cache, and each output row is
+// summed down the columns as soon as its last input row is in. `px`, `py`, `pz` are the points
+// as planes (pz = 0 where unmeasured).
 OBJDB_VECTOR_CLONES
-void smoothPoints(const PointImage& points, int window, float max_relative_distance,
-                  Planar3f* smoothed) {
-  const int w = points.width, h = points.height, r = window / 2;
+void smoothPlanes(const float* __restrict px, const float* __restrict py,
+                  const float* __restrict pz, int w, int h, int window,
+                  float max_relative_distance, Planar3f* smoothed) {
+  const int r = window / 2, rows_kept = 2 * r + 1;
   const size_t n = size_t(w) * size_t(h), ws = size_t(w);
   smoothed->resize(n);
-  thread_local std::vector<float> planes, rows, acc;
-  planes.resize(3 * n);
-  rows.resize(4 * n);
+  thread_local std::vector<float> ring, acc;
+  ring.resize(4 * ws * size_t(rows_kept));
   acc.resize(4 * ws);
-  const float* p = points.data.data()->data();
-  float* px = planes.data();
-  float* py = px + n;
-  float* pz = py + n;
-  for (size_t i = 0; i < n; ++i) {
-    px[i] = p[3 * i];
-    py[i] = p[3 * i + 1];
-    pz[i] = std::max(0.0f, p[3 * i + 2]);
-  }
-  // Rows: sums of x, y, z and count over the row window, on the centre pixel's surface.
-  float* rx = rows.data();
-  float* ry = rx + n;
-  float* rz = ry + n;
-  float* rc = rz + n;
-  std::fill(rows.begin(), rows.end(), 0.0f);
-  for (int v = 0; v < h; ++v) {
-    const size_t row = size_t(v) * ws;
-    for (int k = -r; k <= r; ++k) {
-      const int begin = std::max(0, -k), end = std::min(w, w - k);
-      if (end <= begin) continue;
-      const size_t c = row + size_t(begin), o = size_t(ptrdiff_t(c) + k);
-      accumulateSameSurface(pz + c, pz + o, px + o, py + o, pz + o, nullptr, end - begin,
-                            max_relative_distance, rx + c, ry + c, rz + c, rc + c);
-    }
-  }
-  // Columns: the row sums of the pixels above and below on the pixel's surface.
-  float* ax = acc.data();
-  float* ay = ax + ws;
-  float* az = ay + ws;
-  float* ac = az + ws;
+  // Ring slot of input row k: sums of x, y, z and count over the row window, on the centre
+  // pixel's surface.
+  const auto slot = [&](int k) { return ring.data() + 4 * ws * size_t(k % rows_kept); };
+  float* __restrict ax = acc.data();
+  float* __restrict ay = ax + ws;
+  float* __restrict az = ay + ws;
+  float* __restrict ac = az + ws;
   float* __restrict sx = smoothed->x.data();
   float* __restrict sy = smoothed->y.data();
   float* __restrict sz = smoothed->z.data();
-  for (int v = 0; v < h; ++v) {
-    const size_t row = size_t(v) * ws;
+  for (int v = 0; v < h + r; ++v) {
+    if (v < h) {
+      float* rx = slot(v);
+      float* ry = rx + ws;
+      float* rz = ry + ws;
+      float* rc = rz + ws;
+      std::fill(rx, rx + 4 * ws, 0.0f);
+      const size_t row = size_t(v) * ws;
+      for (int k = -r; k <= r; ++k) {
+        const int begin = std::max(0, -k), end = std::min(w, w - k);
+        if (end <= begin) continue;
+        const size_t c = row + size_t(begin), o = size_t(ptrdiff_t(c) + k);
+        accumulateSameSurface(pz + c, pz + o, px + o, py + o, pz + o, nullptr, end - begin,
+                              max_relative_distance, rx + begin, ry + begin, rz + begin,
+                              rc + begin);
+      }
+    }
+    const int out = v - r;  // the output row whose window is complete
+    if (out < 0) continue;
+    const size_t row = size_t(out) * ws;
     std::fill(acc.begin(), acc.end(), 0.0f);
-    for (int k = std::max(-r, -v); k <= std::min(r, h - 1 - v); ++k) {
-      const size_t other = size_t(v + k) * ws;
-      accumulateSameSurface(pz + row, pz + other, rx + other, ry + other, rz + other,
-                            rc + other, w, max_relative_distance, ax, ay, az, ac);
+    for (int k = std::max(-r, -out); k <= std::min(r, h - 1 - out); ++k) {
+      const float* other = slot(out + k);
+      accumulateSameSurface(pz + row, pz + size_t(out + k) * ws, other, other + ws,
+                            other + 2 * ws, other + 3 * ws, w, max_relative_distance, ax, ay,
+                            az, ac);
     }
     const float* __restrict zc = pz + row;
-    const float* __restrict cx = ax;
-    const float* __restrict cy = ay;
-    const float* __restrict cz = az;
-    const float* __restrict cn = ac;
     for (size_t u = 0; u < ws; ++u) {
-      // The pixel itself is always in its sum, so cn ≥ 1 wherever it is measured.
+      // The pixel itself is always in its sum, so ac ≥ 1 wherever it is measured.
       const float measured = zc[u] > 0.0f ? 1.0f : 0.0f;
-      const float scale = measured / std::max(cn[u], 1.0f);
-      sx[row + u] = cx[u] * scale;
-      sy[row + u] = cy[u] * scale;
-      sz[row + u] = cz[u] * scale;
+      const float scale = measured / std::max(ac[u], 1.0f);
+      sx[row + u] = ax[u] * scale;
+      sy[row + u] = ay[u] * scale;
+      sz[row + u] = az[u] * scale;
+    }
+  }
+}
+
+// The points as planes, straight from the depth (as depthToPoints computes them; 0 where
+// unmeasured).
+OBJDB_VECTOR_CLONES
+void depthToPlanes(const DepthImage& depth, const Intrinsics& k, Planar3f* planes) {
+  const int w = depth.width, h = depth.height;
+  planes->resize(size_t(w) * size_t(h));
+  const float fx_inv = float(1.0 / k.fx), fy_inv = float(1.0 / k.fy);
+  const float cx = float(k.cx), cy = float(k.cy);
+  thread_local std::vector<float> ru;
+  ru.resize(size_t(w));
+  for (int u = 0; u < w; ++u) ru[size_t(u)] = (float(u) - cx) * fx_inv;
+  for (int v = 0; v < h; ++v) {
+    const size_t row = size_t(v) * size_t(w);
+    const float ry = (float(v) - cy) * fy_inv;
+    const float* __restrict d = depth.data.data() + row;
+    const float* __restrict rx = ru.data();
+    float* __restrict x = planes->x.data() + row;
+    float* __restrict y = planes->y.data() + row;
+    float* __restrict z = planes->z.data() + row;
+    for (int u = 0; u < w; ++u) {
+      float zu = d[u] > 0.0f ? d[u] : 0.0f;
+      zu = zu < std::numeric_limits<float>::infinity() ? zu : 0.0f;
+      x[u] = rx[u] * zu;
+      y[u] = ry * zu;
+      z[u] = zu;
     }
   }
 }
@@ -481,13 +579,14 @@ void fillSegments(const LabelImage& labels, const PointImage& points, const Plan
 void computeNormals(const PointImage& points, int window, float max_relative_distance,
                     NormalImage* normals) {
   const int w = points.width, h = points.height;
-  Planar3f smoothed, planes;
-  smoothPoints(points, smoothingWindow(window), max_relative_distance, &smoothed);
-  std::vector<float> z(points.data.size());
-  for (size_t i = 0; i < z.size(); ++i) z[i] = std::max(0.0f, points.data[i].z());
-  normalsFromSmoothed(z.data(), smoothed, w, h, differenceOffset(window), max_relative_distance,
-                      &planes);
-  fromPlanes(planes, w, h, normals);
+  Planar3f planes, smoothed, planar_normals;
+  toPlanes(points, &planes);
+  for (float& z : planes.z) z = std::max(0.0f, z);
+  smoothPlanes(planes.x.data(), planes.y.data(), planes.z.data(), w, h, smoothingWindow(window),
+               max_relative_distance, &smoothed);
+  normalsFromSmoothed(planes.z.data(), smoothed, w, h, differenceOffset(window),
+                      max_relative_distance, &planar_normals);
+  fromPlanes(planar_normals, w, h, normals);
 }
 
 void convexityMap(const PointImage& points, const NormalImage& normals, int window,
@@ -539,17 +638,22 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   result.labels = LabelImage(w, h, 0);
 
   auto t = Clock::now();
-  depth_ = depth;
-  for (float& d : depth_.data) {
-    if (!isValidDepth(d)) d = 0.0f;  // NaN, inf, negative → no measurement
+  resize(&depth_, w, h, 0.0f);
+  {
+    const float* __restrict in = depth.data.data();
+    float* __restrict out = depth_.data.data();
+    for (size_t i = 0; i < n_pixels; ++i) out[i] = measured(in[i]) ? in[i] : 0.0f;  // NaN, inf, < 0
   }
   if (params_.fill_holes_iterations > 0) {
-    fillDepthHoles(&depth_, params_.fill_holes_iterations, params_.discontinuity_threshold);
+    fillHoles(depth_.data.data(), nullptr, w, h, params_.fill_holes_iterations,
+              params_.discontinuity_threshold, &scratch_);
   }
   for (float d : depth_.data) result.invalid_pixels += d > 0.0f ? 0 : 1;
   result.timings.filter_ms = msSince(t);
   t = Clock::now();
-  depthToPoints(depth_, intrinsics_, &points_);
+  depthToPlanes(depth_, intrinsics_, &planes_);
+  // The points as an image only for the segments' points (the server's frame path skips them).
+  if (outputs.segment_points) depthToPoints(depth_, intrinsics_, &points_);
   result.timings.points_ms = msSince(t);
 
   if (result.invalid_pixels == n_pixels) {
@@ -563,8 +667,9 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   result.timings.discontinuity_ms = msSince(t);
 
   t = Clock::now();
-  smoothPoints(points_, smoothingWindow(params_.normal_window_px),
-               params_.normal_max_relative_distance, &smoothed_);
+  smoothPlanes(planes_.x.data(), planes_.y.data(), planes_.z.data(), w, h,
+               smoothingWindow(params_.normal_window_px), params_.normal_max_relative_distance,
+               &smoothed_);
   normalsFromSmoothed(depth_.data.data(), smoothed_, w, h,
                       differenceOffset(params_.normal_window_px),
                       params_.normal_max_relative_distance, &normals_);
@@ -589,8 +694,27 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
   const int n_components =
       cv::connectedComponents(free_space, components, 4, CV_32S, cv::CCL_DEFAULT);
   const int32_t* comp = components.ptr<int32_t>();
+  // Four partial histograms: neighbouring pixels mostly share a component, and one histogram
+  // would wait on its own last increment (store-to-load forwarding) at every pixel.
+  std::vector<uint32_t> partial(4 * size_t(n_components), 0);
+  {
+    uint32_t* __restrict a0 = partial.data();
+    uint32_t* __restrict a1 = a0 + n_components;
+    uint32_t* __restrict a2 = a1 + n_components;
+    uint32_t* __restrict a3 = a2 + n_components;
+    size_t i = 0;
+    for (; i + 4 <= n_pixels; i += 4) {
+      ++a0[comp[i]];
+      ++a1[comp[i + 1]];
+      ++a2[comp[i + 2]];
+      ++a3[comp[i + 3]];
+    }
+    for (; i < n_pixels; ++i) ++a0[comp[i]];
+  }
   std::vector<uint32_t> area(size_t(n_components), 0);
-  for (size_t i = 0; i < n_pixels; ++i) ++area[size_t(comp[i])];
+  for (size_t c = 0; c < size_t(n_components); ++c) {
+    for (size_t k = 0; k < 4; ++k) area[c] += partial[k * size_t(n_components) + c];
+  }
   std::vector<int32_t> final_label(size_t(n_components), 0);
   int32_t next = 0;
   for (int c = 1; c < n_components; ++c) {

@@ -133,11 +133,13 @@ class DepthSegmenter {
   // Scratch buffers reused between frames.
   DepthImage depth_;
   PointImage points_;
+  Planar3f planes_;  // the points, as planes
   Planar3f smoothed_;
   Planar3f normals_;
   MaskImage edges_;
   MaskImage boundaries_;
   Image<float> convexity_;
+  std::vector<float> scratch_;
 };
 
 }  // namespace objdb::segmentation

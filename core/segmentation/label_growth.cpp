@@ -1,6 +1,7 @@
 #include "core/segmentation/label_growth.h"
 
 #include <algorithm>
+#include <limits>
 
 #include "core/common/simd.h"
 
@@ -92,6 +93,30 @@ OBJDB_INLINE_KERNEL int32_t nearestNeighbourLabel(const float* D, const int32_t*
   return best;
 }
 
+// nearestNeighbourLabel for a pixel off the image border (all four neighbours exist).
+OBJDB_INLINE_KERNEL int32_t nearestInteriorLabel(const float* D, const int32_t* labels,
+                                                 const float* ru, const float* ry, size_t ws,
+                                                 PixelAt p, float max_d2) {
+  const float z = D[p.i], rx = ru[p.u], rv = ry[p.v], x = rx * z, y = rv * z;
+  const size_t j[4] = {p.i - 1, p.i + 1, p.i - ws, p.i + ws};
+  const float jx[4] = {ru[p.u - 1], ru[p.u + 1], rx, rx};
+  const float jy[4] = {rv, rv, ry[p.v - 1], ry[p.v + 1]};
+  int32_t best = 0;
+  float best_d2 = max_d2;
+  // Chained selects on values (a bool & bool compiles to branches, and they mispredict).
+  for (int d = 0; d < 4; ++d) {
+    const int32_t l = labels[j[d]];
+    const float zj = D[j[d]];
+    const float dx = jx[d] * zj - x, dy = jy[d] * zj - y, dz = zj - z;
+    float d2 = dx * dx + dy * dy + dz * dz;
+    d2 = l != 0 ? d2 : std::numeric_limits<float>::infinity();
+    const bool take = d2 <= best_d2;
+    best_d2 = take ? d2 : best_d2;
+    best = take ? l : best;
+  }
+  return best;
+}
+
 }  // namespace
 
 OBJDB_VECTOR_CLONES
@@ -100,7 +125,7 @@ void growLabels(const DepthImage& depth, const Planar3f& normals, const Intrinsi
   const int w = depth.width, h = depth.height;
   const size_t n = size_t(w) * size_t(h), ws = size_t(w);
   if (w < 3 || h < 3 || iterations <= 0) return;
-  thread_local std::vector<uint8_t> growable_storage, queued_storage;
+  thread_local std::vector<uint8_t> growable_storage, open_storage;
   thread_local std::vector<int32_t> prev_storage;
   thread_local std::vector<float> ru_storage, ry_storage;
   thread_local std::vector<PixelAt> changed, candidates;
@@ -148,41 +173,64 @@ void growLabels(const DepthImage& depth, const Planar3f& normals, const Intrinsi
       grow_border_pixel(w - 1, v);
       if (!any && L[row] == prev[row] && L[row + ws - 1] == prev[row + ws - 1]) continue;
     }
+    // Branch-free: every pixel is written to the next slot, which is kept when it changed.
+    size_t count = changed.size();
+    changed.resize(count + ws);
     for (int u = 0; u < w; ++u) {
-      if (L[row + size_t(u)] != prev[row + size_t(u)]) {
-        changed.push_back({uint32_t(row + size_t(u)), uint16_t(u), uint16_t(v)});
-      }
+      changed[count] = {uint32_t(row + size_t(u)), uint16_t(u), uint16_t(v)};
+      count += L[row + size_t(u)] != prev[row + size_t(u)] ? 1 : 0;
     }
+    changed.resize(count);
   }
 
   // Later rings: the unlabelled growable neighbours of the last ring, against the labels so far.
-  queued_storage.resize(n);
-  uint8_t* __restrict queued = queued_storage.data();  // all 0 between calls
+  // `open` (padded by one pixel of 0 on every side, so that a neighbour needs no bounds test)
+  // marks the growable pixels without a label that are not queued yet: one byte to test.
+  const size_t pw = ws + 2;
+  open_storage.assign(pw * size_t(h + 2), 0);
+  uint8_t* __restrict open = open_storage.data();
+  // Growable pixels had no label before ring 1: open = growable minus ring 1's pixels.
+  for (int v = 0; v < h; ++v) {
+    std::copy(growable + size_t(v) * ws, growable + size_t(v + 1) * ws,
+              open + size_t(v + 1) * pw + 1);
+  }
+  for (const PixelAt p : changed) open[size_t(p.v + 1) * pw + size_t(p.u + 1)] = 0;
+  const ptrdiff_t step[4] = {-1, 1, -ptrdiff_t(pw), ptrdiff_t(pw)};
+  const int step_u[4] = {-1, 1, 0, 0}, step_v[4] = {0, 0, -1, 1};
+  const ptrdiff_t step_i[4] = {-1, 1, -ptrdiff_t(ws), ptrdiff_t(ws)};
   for (int it = 1; it < iterations && !changed.empty(); ++it) {
-    candidates.clear();
+    // Branch-free as in ring 1 (whether a neighbour is open is unpredictable).
+    candidates.resize(4 * changed.size());
+    size_t count = 0;
     for (const PixelAt p : changed) {
-      const int nu[4] = {p.u - 1, p.u + 1, p.u, p.u}, nv[4] = {p.v, p.v, p.v - 1, p.v + 1};
+      const size_t padded = size_t(p.v + 1) * pw + size_t(p.u + 1);
       for (int d = 0; d < 4; ++d) {
-        if (nu[d] < 0 || nv[d] < 0 || nu[d] >= w || nv[d] >= h) continue;
-        const size_t j = size_t(nv[d]) * ws + size_t(nu[d]);
-        if (growable[j] & (L[j] == 0) & (queued[j] == 0)) {
-          queued[j] = 1;
-          candidates.push_back({uint32_t(j), uint16_t(nu[d]), uint16_t(nv[d])});
-        }
+        uint8_t& o = open[ptrdiff_t(padded) + step[d]];
+        const int u = p.u + step_u[d], v = p.v + step_v[d];
+        candidates[count] = {uint32_t(ptrdiff_t(p.i) + step_i[d]), uint16_t(u), uint16_t(v)};
+        count += o;
+        o = 0;
       }
     }
-    new_labels.resize(candidates.size());
-    for (size_t c = 0; c < candidates.size(); ++c) {
-      new_labels[c] = nearestNeighbourLabel(D, L, ru, ry, w, h, candidates[c], max_d2);
+    candidates.resize(count);
+    new_labels.resize(count);
+    for (size_t c = 0; c < count; ++c) {
+      const PixelAt q = candidates[c];
+      new_labels[c] = (q.u > 0) & (q.v > 0) & (int(q.u) + 1 < w) & (int(q.v) + 1 < h)
+                          ? nearestInteriorLabel(D, L, ru, ry, ws, q, max_d2)
+                          : nearestNeighbourLabel(D, L, ru, ry, w, h, q, max_d2);
     }
-    changed.clear();
-    for (size_t c = 0; c < candidates.size(); ++c) {
-      queued[candidates[c].i] = 0;
-      if (new_labels[c] != 0) {
-        L[candidates[c].i] = new_labels[c];
-        changed.push_back(candidates[c]);
-      }
+    changed.resize(count);
+    size_t grown = 0;
+    for (size_t c = 0; c < count; ++c) {
+      const PixelAt q = candidates[c];
+      const int32_t label = new_labels[c];
+      L[q.i] = label;  // 0 before
+      open[size_t(q.v + 1) * pw + size_t(q.u + 1)] = label == 0 ? 1 : 0;  // may grow later
+      changed[grown] = q;
+      grown += label != 0 ? 1 : 0;
     }
+    changed.resize(grown);
   }
 }
 

@@ -614,6 +614,92 @@ TEST(FillDepthHoles, ClosesAGridOfPinholesButNotAHoleOnADepthEdge) {
   EXPECT_EQ(edge.at(5, 5), 0.0f);
 }
 
+// The vectorised kernels against plain scalar loops, on a noisy image with holes, NaN and ±inf.
+DepthImage randomDepthWithHoles(int w, int h, uint32_t seed) {
+  DepthImage depth(w, h, 0.0f);
+  uint32_t x = seed;
+  const auto next = [&x] {
+    x = x * 1664525u + 1013904223u;
+    return float(x >> 8) / float(1u << 24);
+  };
+  for (int v = 0; v < h; ++v) {
+    for (int u = 0; u < w; ++u) {
+      const float r = next();
+      float d = (u < w / 2 ? 1.0f : 1.6f) + 0.01f * next();  // two surfaces and a step
+      if (r < 0.15f) d = 0.0f;
+      else if (r < 0.16f) d = std::numeric_limits<float>::quiet_NaN();
+      else if (r < 0.165f) d = std::numeric_limits<float>::infinity();
+      else if (r < 0.17f) d = -1.0f;
+      depth.at(u, v) = d;
+    }
+  }
+  return depth;
+}
+
+TEST(FillDepthHoles, MatchesAScalarReferenceBitForBit) {
+  for (const auto& [w, h] : {std::pair{37, 23}, std::pair{64, 48}, std::pair{3, 3}}) {
+    DepthImage depth = randomDepthWithHoles(w, h, uint32_t(w * 7 + h));
+    DepthImage reference = depth;
+    size_t reference_filled = 0;
+    for (int it = 0; it < 2; ++it) {
+      DepthImage next = reference;
+      for (int v = 1; v + 1 < h; ++v) {
+        for (int u = 1; u + 1 < w; ++u) {
+          if (isValidDepth(reference.at(u, v))) continue;
+          float sum = 0.0f, lo = std::numeric_limits<float>::max(), hi = 0.0f;
+          int n = 0;
+          for (int dv = -1; dv <= 1; ++dv) {
+            for (int du = -1; du <= 1; ++du) {
+              const float d = reference.at(u + du, v + dv);
+              if (!isValidDepth(d)) continue;
+              sum += d, lo = std::min(lo, d), hi = std::max(hi, d), ++n;
+            }
+          }
+          if (n >= 5 && hi - lo <= 0.03f * lo) {
+            next.at(u, v) = sum / float(n);
+            ++reference_filled;
+          }
+        }
+      }
+      reference = next;
+    }
+    EXPECT_EQ(fillDepthHoles(&depth, 2), reference_filled) << w << "x" << h;
+    for (size_t i = 0; i < depth.data.size(); ++i) {
+      const float a = depth.data[i], b = reference.data[i];
+      EXPECT_TRUE(a == b || (std::isnan(a) && std::isnan(b))) << "pixel " << i << ": " << a
+                                                             << " vs " << b;
+    }
+  }
+}
+
+TEST(DiscontinuityMap, MatchesAScalarReference) {
+  for (const int window : {3, 5}) {
+    const int w = 41, h = 29;
+    const DepthImage depth = randomDepthWithHoles(w, h, uint32_t(window));
+    MaskImage edges;
+    discontinuityMap(depth, window, 0.03f, &edges);
+    const int r = window / 2;
+    for (int v = 0; v < h; ++v) {
+      for (int u = 0; u < w; ++u) {
+        const float z = depth.at(u, v);
+        bool edge = false;
+        if (isValidDepth(z)) {
+          for (int dv = -r; dv <= r; ++dv) {
+            for (int du = -r; du <= r; ++du) {
+              const int uu = u + du, vv = v + dv;
+              if (uu < 0 || vv < 0 || uu >= w || vv >= h) continue;
+              const float d = depth.at(uu, vv);
+              if (isValidDepth(d) && std::abs(d - z) > 0.03f * z) edge = true;
+            }
+          }
+        }
+        EXPECT_EQ(edges.at(u, v), edge ? 1 : 0) << "window " << window << " at " << u << ","
+                                                << v;
+      }
+    }
+  }
+}
+
 // --- Minimum segment size ------------------------------------------------------------------------
 
 TEST(DepthSegmenter, RegionSmallerThanTheMinimumIsDroppedAndCounted) {
