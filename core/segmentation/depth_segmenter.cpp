@@ -48,6 +48,15 @@ inline bool measured(float d) {
   return (d > 0.0f) & (d < std::numeric_limits<float>::infinity());
 }
 
+// out = the measured depths of `in`, 0 where NaN, ±inf or ≤ 0 (chained selects: vectorises).
+OBJDB_VECTOR_CLONES
+void sanitiseDepth(const float* __restrict in, size_t n, float* __restrict out) {
+  for (size_t i = 0; i < n; ++i) {
+    const float d = in[i] > 0.0f ? in[i] : 0.0f;
+    out[i] = d < std::numeric_limits<float>::infinity() ? d : 0.0f;
+  }
+}
+
 // One pass of hole filling over the interior of row v: out = the row of `in` (measured depths,
 // 0 elsewhere), except that an unmeasured pixel with ≥ 5 measured 3 × 3 neighbours whose depths
 // spread ≤ `spread` · their minimum takes their mean; other unmeasured pixels keep `keep`'s value.
@@ -239,6 +248,22 @@ OBJDB_INLINE_KERNEL void accumulateSameSurface(const float* __restrict zc,
   }
 }
 
+// The smoothed points of one row from its window sums: the sums over their counts, zero where
+// the pixel is unmeasured (the pixel itself is always in its sum, so the count is ≥ 1 there).
+OBJDB_INLINE_KERNEL void normaliseSums(const float* __restrict zc, const float* __restrict ax,
+                                       const float* __restrict ay, const float* __restrict az,
+                                       const float* __restrict ac, int count,
+                                       float* __restrict ox, float* __restrict oy,
+                                       float* __restrict oz) {
+  for (int u = 0; u < count; ++u) {
+    const float scale = 1.0f / (ac[u] > 1.0f ? ac[u] : 1.0f);
+    const float z = zc[u];
+    ox[u] = z > 0.0f ? ax[u] * scale : 0.0f;
+    oy[u] = z > 0.0f ? ay[u] * scale : 0.0f;
+    oz[u] = z > 0.0f ? az[u] * scale : 0.0f;
+  }
+}
+
 // Edge-preserving box filter of the points, as planes: smoothed(u, v) = mean of the valid points
 // of the window that lie on the pixel's surface (|Δz| ≤ `max_relative_distance` · z), zero where
 // the pixel is unmeasured. A plain box filter would average a silhouette's foreground with the
@@ -299,15 +324,7 @@ void smoothPlanes(const float* __restrict px, const float* __restrict py,
                             other + 2 * ws, other + 3 * ws, w, max_relative_distance, ax, ay,
                             az, ac);
     }
-    const float* __restrict zc = pz + row;
-    for (size_t u = 0; u < ws; ++u) {
-      // The pixel itself is always in its sum, so ac ≥ 1 wherever it is measured.
-      const float measured = zc[u] > 0.0f ? 1.0f : 0.0f;
-      const float scale = measured / std::max(ac[u], 1.0f);
-      sx[row + u] = ax[u] * scale;
-      sy[row + u] = ay[u] * scale;
-      sz[row + u] = az[u] * scale;
-    }
+    normaliseSums(pz + row, ax, ay, az, ac, w, sx + row, sy + row, sz + row);
   }
 }
 
@@ -639,11 +656,7 @@ StatusOr<SegmentationResult> DepthSegmenter::segment(const DepthImage& depth,
 
   auto t = Clock::now();
   resize(&depth_, w, h, 0.0f);
-  {
-    const float* __restrict in = depth.data.data();
-    float* __restrict out = depth_.data.data();
-    for (size_t i = 0; i < n_pixels; ++i) out[i] = measured(in[i]) ? in[i] : 0.0f;  // NaN, inf, < 0
-  }
+  sanitiseDepth(depth.data.data(), n_pixels, depth_.data.data());
   if (params_.fill_holes_iterations > 0) {
     fillHoles(depth_.data.data(), nullptr, w, h, params_.fill_holes_iterations,
               params_.discontinuity_threshold, &scratch_);
