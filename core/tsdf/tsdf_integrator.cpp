@@ -164,6 +164,12 @@ size_t integrateBlocks(const VoxelPass& p, TsdfBlock* const* blocks, const Block
 
 }  // namespace
 
+TsdfIntegrator::TsdfIntegrator(const TsdfParams& params, const Intrinsics& intrinsics, int threads)
+    : params_(params),
+      intrinsics_(intrinsics),
+      threads_(threads),
+      pool_(threads > 1 ? std::make_shared<WorkerPool>(threads) : nullptr) {}
+
 StatusOr<TsdfIntegrator> TsdfIntegrator::create(const TsdfParams& params,
                                                 const Intrinsics& intrinsics, int threads) {
   OBJDB_RETURN_IF_ERROR(params.validate());
@@ -257,10 +263,7 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
         touch_rows(v, std::min(h, v + kRowChunk), out);
       }
     };
-    std::vector<std::thread> workers;
-    for (size_t t = 1; t < row_threads; ++t) workers.emplace_back(collect, &rows[t]);
-    collect(&rows[0]);  // this thread works too
-    for (auto& worker : workers) worker.join();
+    runOnPool(pool_.get(), int(row_threads), [&](int t) { collect(&rows[size_t(t)]); });
   }
   absl::flat_hash_set<BlockIndex, BlockIndexHash>& touched = rows[0].blocks;
   for (size_t t = 0; t < row_threads; ++t) {
@@ -285,7 +288,7 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   std::vector<BlockIndex> indices;
   indices.reserve(keyed.size());
   for (const auto& [k, b] : keyed) indices.push_back(b);
-  const std::vector<TsdfBlock*> blocks = layer->allocateBlocks(indices, threads_);
+  const std::vector<TsdfBlock*> blocks = layer->allocateBlocks(indices, pool_.get());
   stats.blocks_touched = blocks.size();
 
   // 2. Every voxel of those blocks: project, compare with the measured depth, fuse. Blocks are
@@ -320,12 +323,7 @@ StatusOr<IntegrationStats> TsdfIntegrator::integrate(const DepthImage& depth,
   };
   const size_t n_threads = std::min<size_t>(size_t(threads_), std::max<size_t>(1, blocks.size()));
   std::vector<size_t> updated(n_threads, 0);
-  {
-    std::vector<std::thread> workers;
-    for (size_t t = 1; t < n_threads; ++t) workers.emplace_back(integrate_chunks, &updated[t]);
-    integrate_chunks(&updated[0]);  // this thread works too
-    for (auto& worker : workers) worker.join();
-  }
+  runOnPool(pool_.get(), int(n_threads), [&](int t) { integrate_chunks(&updated[size_t(t)]); });
   for (size_t n : updated) stats.voxels_updated += n;
   stats.milliseconds =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

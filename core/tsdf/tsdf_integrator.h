@@ -10,9 +10,12 @@
 // at −truncation (voxblox's weight drop-off); weights saturate at max_weight.
 #pragma once
 
+#include <memory>
+
 #include "core/common/image.h"
 #include "core/common/intrinsics.h"
 #include "core/common/params.h"
+#include "core/common/worker_pool.h"
 #include "core/common/transform.h"
 #include "core/tsdf/tsdf_layer.h"
 
@@ -39,11 +42,13 @@ class TsdfIntegrator {
                                        TsdfLayer* layer, const ColorImage* color = nullptr) const;
 
  private:
-  TsdfIntegrator(const TsdfParams& params, const Intrinsics& intrinsics, int threads)
-      : params_(params), intrinsics_(intrinsics), threads_(threads) {}
+  TsdfIntegrator(const TsdfParams& params, const Intrinsics& intrinsics, int threads);
   TsdfParams params_;
   Intrinsics intrinsics_;
   int threads_;
+  // The threads − 1 workers, started once (copies of the integrator share them; integrations
+  // through copies on different threads take turns on them). Null for one thread.
+  std::shared_ptr<WorkerPool> pool_;
 };
 
 }  // namespace objdb::tsdf

@@ -70,7 +70,7 @@ TsdfBlock& TsdfLayer::allocateBlock(const BlockIndex& b) {
 }
 
 std::vector<TsdfBlock*> TsdfLayer::allocateBlocks(const std::vector<BlockIndex>& indices,
-                                                  int threads) {
+                                                  WorkerPool* pool) {
   // Room for every index first: the inserts below then never rehash, so the slots' addresses
   // stay valid and each slot is written by one thread only.
   blocks_.reserve(blocks_.size() + indices.size());
@@ -94,13 +94,10 @@ std::vector<TsdfBlock*> TsdfLayer::allocateBlocks(const std::vector<BlockIndex>&
     }
   };
   // Threads only for enough memory to be worth one (a block is a few kB to a few hundred kB).
-  const size_t n = std::clamp<size_t>(pending.size() / 32, 1, size_t(std::max(threads, 1)));
-  std::vector<std::thread> workers;
-  for (size_t t = 1; t < n; ++t) {
-    workers.emplace_back(fill, pending.size() * t / n, pending.size() * (t + 1) / n);
-  }
-  fill(0, pending.size() / n);  // this thread works too
-  for (auto& worker : workers) worker.join();
+  const int n = int(std::clamp<size_t>(pending.size() / 32, 1, size_t(pool ? pool->threads() : 1)));
+  runOnPool(pool, n, [&](int t) {
+    fill(pending.size() * size_t(t) / size_t(n), pending.size() * size_t(t + 1) / size_t(n));
+  });
   return out;
 }
 

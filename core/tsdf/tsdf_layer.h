@@ -12,6 +12,7 @@
 #include <Eigen/Core>
 
 #include "absl/container/flat_hash_map.h"
+#include "core/common/worker_pool.h"
 #include "core/common/image.h"
 #include "core/common/status.h"
 
@@ -77,9 +78,10 @@ class TsdfLayer {
   TsdfBlock& allocateBlock(const BlockIndex& b);
   // allocateBlock for every index (no duplicates), the blocks in the same order. The map grows on
   // the calling thread; new blocks are created (zeroed) and blocks shared with a snapshot are
-  // copied on `threads` threads, so a frame's fresh or just-snapshotted blocks do not cost serial
-  // memory traffic.
-  std::vector<TsdfBlock*> allocateBlocks(const std::vector<BlockIndex>& indices, int threads);
+  // copied on the pool's threads (null: this thread), so a frame's fresh or just-snapshotted
+  // blocks do not cost serial memory traffic.
+  std::vector<TsdfBlock*> allocateBlocks(const std::vector<BlockIndex>& indices,
+                                         WorkerPool* pool);
   const TsdfVoxel* voxel(const VoxelIndex& v) const;
   TsdfVoxel* voxel(const VoxelIndex& v);
 

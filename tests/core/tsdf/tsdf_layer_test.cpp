@@ -119,7 +119,8 @@ TEST(TsdfLayer, AllocateBlocksCreatesCopiesSharedAndKeepsOwnBlocksOnAnyThreadCou
     const TsdfBlock* own = &*layer.blocks().at(BlockIndex(0, 1, 0));
     std::vector<BlockIndex> indices;
     for (int x = 0; x < 300; ++x) indices.emplace_back(x, 1, 0);
-    const std::vector<TsdfBlock*> blocks = layer.allocateBlocks(indices, threads);
+    WorkerPool pool(threads);
+    const std::vector<TsdfBlock*> blocks = layer.allocateBlocks(indices, &pool);
     ASSERT_EQ(blocks.size(), indices.size());
     EXPECT_EQ(layer.numBlocks(), 300u);
     EXPECT_EQ(layer.numSharedBlocks(), 0u) << threads;
