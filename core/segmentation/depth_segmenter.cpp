@@ -43,17 +43,18 @@ void resize(Image<T>* image, int w, int h, T fill) {
 
 namespace {
 
-// A depth is a measurement when positive and finite; NaN fails both comparisons (branch-free).
-inline bool measured(float d) {
-  return (d > 0.0f) & (d < std::numeric_limits<float>::infinity());
+// The depth when it is a measurement (positive and finite), else 0: NaN and −inf fail d > 0,
+// +inf fails d < inf. Chained selects on values, so that the loops using it vectorise.
+OBJDB_INLINE_KERNEL float measuredOrZero(float d) {
+  const float positive = d > 0.0f ? d : 0.0f;
+  return positive < std::numeric_limits<float>::infinity() ? positive : 0.0f;
 }
 
 // out = the measured depths of `in`, 0 where NaN, ±inf or ≤ 0 (chained selects: vectorises).
 OBJDB_VECTOR_CLONES
 void sanitiseDepth(const float* __restrict in, size_t n, float* __restrict out) {
   for (size_t i = 0; i < n; ++i) {
-    const float d = in[i] > 0.0f ? in[i] : 0.0f;
-    out[i] = d < std::numeric_limits<float>::infinity() ? d : 0.0f;
+    out[i] = measuredOrZero(in[i]);
   }
 }
 
@@ -127,7 +128,7 @@ size_t fillHoles(float* clean, const float* keep, int w, int h, int iterations, 
 size_t fillDepthHoles(DepthImage* depth, int iterations, float max_relative_spread) {
   const size_t n = depth->data.size();
   std::vector<float> clean(n), scratch;
-  for (size_t i = 0; i < n; ++i) clean[i] = measured(depth->data[i]) ? depth->data[i] : 0.0f;
+  sanitiseDepth(depth->data.data(), n, clean.data());
   const size_t filled = fillHoles(clean.data(), depth->data.data(), depth->width, depth->height,
                                   iterations, max_relative_spread, &scratch);
   depth->data.swap(clean);
@@ -179,9 +180,7 @@ void discontinuityMap(const DepthImage& depth, int window, float threshold, Mask
     for (int k = std::max(0, v - r); k <= std::min(h - 1, v + r); ++k) {
       const float* __restrict row = d + size_t(k) * ws;
       for (size_t u = 0; u < ws; ++u) {
-        // Chained selects (NaN and −inf fail t > 0, +inf fails t < inf): they vectorise.
-        float t = row[u] > 0.0f ? row[u] : 0.0f;
-        t = t < kInf ? t : 0.0f;
+        const float t = measuredOrZero(row[u]);
         chi[u] = std::max(chi[u], t);
         clo[u] = std::min(clo[u], t > 0.0f ? t : kInf);
       }
@@ -200,8 +199,7 @@ void discontinuityMap(const DepthImage& depth, int window, float threshold, Mask
     }
     const float* __restrict zr = d + size_t(v) * ws;
     for (size_t u = 0; u < ws; ++u) {  // the edge flag as 0 / 1 in rhi, then packed to bytes
-      float z = zr[u] > 0.0f ? zr[u] : 0.0f;
-      z = z < kInf ? z : 0.0f;
+      const float z = measuredOrZero(zr[u]);
       const float jump = std::max(rhi[u] - z, z - rlo[u]);
       const float flag = jump > threshold * z ? 1.0f : 0.0f;
       rhi[u] = z > 0.0f ? flag : 0.0f;
@@ -348,8 +346,7 @@ void depthToPlanes(const DepthImage& depth, const Intrinsics& k, Planar3f* plane
     float* __restrict y = planes->y.data() + row;
     float* __restrict z = planes->z.data() + row;
     for (int u = 0; u < w; ++u) {
-      float zu = d[u] > 0.0f ? d[u] : 0.0f;
-      zu = zu < std::numeric_limits<float>::infinity() ? zu : 0.0f;
+      const float zu = measuredOrZero(d[u]);
       x[u] = rx[u] * zu;
       y[u] = ry * zu;
       z[u] = zu;

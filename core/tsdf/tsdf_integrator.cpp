@@ -5,7 +5,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <thread>
 
 #include "absl/container/flat_hash_set.h"
 #include "core/common/simd.h"
