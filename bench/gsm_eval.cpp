@@ -184,7 +184,8 @@ int main(int argc, char** argv) {
       for (const auto& [key, voxel_truth] : truth) {
         const uint16_t id = uint16_t(voxel_truth.mainLabel());
         const tsdf::VoxelIndex x = unpackGridKey(key);
-        const gsm::Label l = map.mainLabel(x);
+        // As objects, an annexed structure voxel counts as the object that took it.
+        const gsm::Label l = as_objects ? groups.partAt(x, map.mainLabel(x)) : map.mainLabel(x);
         ++object_voxels[id];
         if (l != 0) {
           ++by_label[id][unit(l)];
@@ -207,9 +208,14 @@ int main(int argc, char** argv) {
       for (const auto& [id, n] : object_voxels) {
         if (structure.count(id)) continue;
         size_t best = 0, parts = 0, labelled = 0, in_union = 0;
+        std::string big;  // the units above 10 %: unit id, share, whose majority it is
         for (const auto& [l, c] : by_label[id]) {
           best = std::max(best, c);
           parts += c * 10 > n ? 1 : 0;
+          if (c * 10 > n) {
+            big += absl::StrFormat("%s%u %.2f%s", big.empty() ? "" : ", ", l, double(c) / double(n),
+                                   majority_of[l] == id ? "" : absl::StrFormat(" of %d", majority_of[l]));
+          }
           labelled += c;
           in_union += majority_of[l] == id ? c : 0;
         }
@@ -222,9 +228,9 @@ int main(int argc, char** argv) {
           if (uint16_t(o.id) == id) kind = o.category;
         }
         q.per_object += absl::StrFormat(
-            "%s%d %s %.2f, union %.2f (%zu %s > 10 %%, %.0f %% unlabelled)",
+            "%s%d %s %.2f, union %.2f (%zu %s > 10 %%: %s; %.0f %% unlabelled)",
             q.per_object.empty() ? "" : "; ", id, kind, share, union_share, parts,
-            as_objects ? "objects" : "labels", 100.0 * (1.0 - double(labelled) / double(n)));
+            as_objects ? "objects" : "labels", big, 100.0 * (1.0 - double(labelled) / double(n)));
         q.worst = std::min(q.worst, share);
         q.sum += share;
         ++q.objects;

@@ -7,6 +7,7 @@
 // the database's time per stage (paper Table II: P, K, D, MR, MV, SV).
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -177,7 +178,8 @@ int runEvalCommand(int argc, char** argv) {
     }
     server_options.db_path = o.db;
   }
-  setLogLevel("warn");  // the server's per-session lines would bury the progress
+  // The server's per-session lines would bury the progress (OBJDB_LOG_LEVEL asks for them).
+  if (std::getenv("OBJDB_LOG_LEVEL") == nullptr) setLogLevel("warn");
   auto server = ObjdbServer::start(server_options);
   if (!server.ok()) return cli::reportError(kCommand, server.status());
   cli::Connection connection;

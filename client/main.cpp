@@ -1,9 +1,11 @@
 // objdb: command-line client of the objdb server. Dispatches to the subcommands in commands.h.
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <string>
 
 #include "client/commands.h"
+#include "core/common/logging.h"
 
 namespace {
 
@@ -28,6 +30,10 @@ commands:
   help     show this text
 
 Run "objdb <command> --help" for the options of a command.
+
+environment:
+  OBJDB_LOG_LEVEL  trace, debug, info, warn, error, critical or off: the log level of the
+                   pipeline's messages (default info; eval's in-process server: warn)
 )";
 
 }  // namespace
@@ -38,6 +44,13 @@ int main(int argc, char** argv) {
     return 2;
   }
   const std::string command = argv[1];
+  if (const char* level = std::getenv("OBJDB_LOG_LEVEL"); level != nullptr && *level != '\0') {
+    if (!objdb::setLogLevel(level)) {
+      std::fprintf(stderr, "objdb: unknown OBJDB_LOG_LEVEL \"%s\" (use trace, debug, info, warn, "
+                   "error, critical or off)\n", level);
+      return 2;
+    }
+  }
   if (command == "help" || command == "--help" || command == "-h") {
     std::fputs(kUsage, stdout);
     return 0;

@@ -58,6 +58,8 @@ session within 5 cm are one object under two GSM labels) and models per true obj
   --out FILE.png    the sheet
   --max-rows N      at most N models, the ones with the most placements first (default 40)
   --every N         look for the best view in every N-th frame (default 1)
+  --min-segments N  merges: draw the models built from at least N segments (default 2; 1 draws
+                    every model, the unmerged ones too)
   -h, --help        show this text
 
 exit status: 0 sheet written; 1 the database, a dataset or the sheet failed; 2 command-line error.
@@ -119,7 +121,7 @@ void drawCloud(const std::vector<Eigen::Vector3f>& points, cv::Mat* panel) {
 
 struct Options {
   std::string db_path, out;
-  size_t max_rows = 40, every = 1;
+  size_t max_rows = 40, every = 1, min_segments = 2;
   std::map<std::string, std::string> datasets;  // session → folder
 };
 
@@ -131,15 +133,16 @@ int parseOptions(int argc, char** argv, Options* o) {
     if (a == "-h" || a == "--help") {
       std::fputs(kUsage, stdout);
       return 0;
-    } else if (a == "--db" || a == "--out" || a == "--max-rows" || a == "--every") {
+    } else if (a == "--db" || a == "--out" || a == "--max-rows" || a == "--every" ||
+               a == "--min-segments") {
       const char* v = value();
       if (v == nullptr) return cli::usageError(kCommand, a + " needs a value", kUsage);
       if (a == "--db") o->db_path = v;
       if (a == "--out") o->out = v;
-      if (a == "--max-rows" || a == "--every") {
+      if (a == "--max-rows" || a == "--every" || a == "--min-segments") {
         const long n = std::strtol(v, nullptr, 10);
         if (n < 1) return cli::usageError(kCommand, a + " must be a whole number >= 1", kUsage);
-        (a == "--every" ? o->every : o->max_rows) = size_t(n);
+        (a == "--every" ? o->every : a == "--max-rows" ? o->max_rows : o->min_segments) = size_t(n);
       }
     } else if (!a.empty() && a[0] == '-') {
       return cli::usageError(kCommand, "unknown option " + a, kUsage);
@@ -168,7 +171,7 @@ int merges(int argc, char** argv) {
   options.read_only = true;
   auto store = storage::SqliteStore::open(db_path, options);
   if (!store.ok()) return cli::reportError(kCommand, store.status());
-  auto loaded = cli::loadRows(**store, 2, o.max_rows);
+  auto loaded = cli::loadRows(**store, o.min_segments, o.max_rows);
   if (!loaded.ok()) return cli::reportError(kCommand, loaded.status());
   std::vector<cli::Row> rows = *std::move(loaded);
   std::map<std::string, std::unique_ptr<io::Dataset>> opened;
@@ -180,9 +183,9 @@ int merges(int argc, char** argv) {
   cv::Mat sheet(40 + kRowHeight * int(std::max<size_t>(rows.size(), 1)), width, CV_8UC3,
                 cv::Scalar(30, 30, 30));
   text(&sheet,
-       absl::StrFormat("%s: %d models built from 2 or more segments (placements over the frame "
+       absl::StrFormat("%s: %d models built from %d or more segments (placements over the frame "
                        "that sees them best)",
-                       db_path, rows.size()),
+                       db_path, rows.size(), o.min_segments),
        10, 26, 0.6);
   if (rows.empty()) text(&sheet, "no merges", 10, 70, 0.6);
   const cv::Scalar colours[] = {{80, 255, 80}, {255, 120, 255}, {80, 200, 255}, {255, 200, 80},

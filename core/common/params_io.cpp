@@ -52,6 +52,8 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("object_structure_extent_m", p.object_structure_extent_m);
   fn("object_support_probe_m", p.object_support_probe_m);
   fn("object_support_max_ratio", p.object_support_max_ratio);
+  fn("object_annex_height_m", p.object_annex_height_m);
+  fn("object_shadow_gap_m", p.object_shadow_gap_m);
   fn("object_update_frames", p.object_update_frames);
 }
 template <typename Fn>

@@ -6,6 +6,8 @@
 #include <map>
 #include <tuple>
 
+#include "core/common/grid_key.h"
+
 namespace objdb::gsm {
 namespace {
 
@@ -383,6 +385,20 @@ void appendBlockVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Keep&& 
   }
 }
 
+// An object's voxels as objects.h defines them: its parts' own (`voxels`), less those another
+// object took from a structure label, plus the structure voxels it took itself.
+void applyAnnexed(Label id, const ObjectGroups& groups, std::vector<tsdf::VoxelIndex>* voxels) {
+  if (groups.annexed_part.empty()) return;
+  voxels->erase(std::remove_if(voxels->begin(), voxels->end(),
+                               [&](const tsdf::VoxelIndex& v) {
+                                 return groups.annexed_part.contains(packGridKey(v));
+                               }),
+                voxels->end());
+  const auto it = groups.annexed.find(id);
+  if (it == groups.annexed.end()) return;
+  for (const AnnexedVoxel& a : it->second) voxels->push_back(a.voxel);
+}
+
 }  // namespace
 
 RawSegment extractRawSegment(const tsdf::TsdfLayer& layer, Label label,
@@ -430,14 +446,14 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
     }
   }
   // One segment per object (its parts' voxels together), or per label.
-  std::map<Label, std::vector<Label>> groups;
+  ObjectGroups groups;
   if (params.objects) {
-    groups = groupObjects(layer, labels, params).members;
+    groups = groupObjects(layer, labels, params);
   } else {
-    for (const auto& [label, unused] : blocks_of) groups[label] = {label};
+    for (const auto& [label, unused] : blocks_of) groups.members[label] = {label};
   }
   std::vector<RawSegment> segments;
-  for (const auto& [id, parts] : groups) {
+  for (const auto& [id, parts] : groups.members) {
     std::vector<tsdf::VoxelIndex> voxels;
     for (const Label label : parts) {
       for (const tsdf::BlockIndex& b : blocks_of[label]) {
@@ -446,10 +462,11 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
                           &voxels);
       }
     }
+    applyAnnexed(id, groups, &voxels);
     if (voxels.size() < size_t(std::max(params.min_label_voxels, 1))) continue;
     segments.push_back(extractRawSegment(
         layer, id, std::move(voxels), margin, frame, frame, [&](const tsdf::VoxelIndex& v) {
-          return labels.at(layer.blockOfVoxel(v))[layer.linearInBlock(v)];
+          return groups.partAt(v, labels.at(layer.blockOfVoxel(v))[layer.linearInBlock(v)]);
         }));
     segments.back().parts = parts;
   }
@@ -533,11 +550,11 @@ std::vector<RawSegment> Gsm::extractIdleLabels(bool flush) {
 std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
   if (flush || grouped_frame_ < 0 || frame_ - grouped_frame_ >= params_.object_update_frames) {
     grouped_frame_ = frame_;
-    groups_ = groupObjects().members;
+    groups_ = groupObjects();
     // An object extracted before whose id is no object now went into another (or vanished).
     std::vector<Label> gone;
     for (const auto& [id, extracted] : extracted_objects_) {
-      if (!groups_.count(id)) gone.push_back(id);
+      if (!groups_.members.count(id)) gone.push_back(id);
     }
     std::sort(gone.begin(), gone.end());
     for (const Label id : gone) {
@@ -549,7 +566,7 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
   // through the merges since).
   std::vector<RawSegment> segments;
   const int margin = int(std::ceil(tsdf_params_.truncation_voxels));
-  for (auto& [id, parts] : groups_) {
+  for (auto& [id, parts] : groups_.members) {
     for (Label& l : parts) l = resolve(l);
     std::sort(parts.begin(), parts.end());
     parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
@@ -567,6 +584,7 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
       continue;  // extracted since its last change
     }
     std::vector<tsdf::VoxelIndex> voxels = voxelsOf(parts);
+    applyAnnexed(id, groups_, &voxels);
     if (voxels.size() < size_t(params_.min_label_voxels)) {
       if (earlier != extracted_objects_.end()) {
         withdrawn_.push_back(id);
@@ -578,7 +596,18 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     const float depth = observationDepth(voxels, last_update);
     segments.push_back(
         extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_,
-                          [this](const tsdf::VoxelIndex& v) { return mainLabel(v); }));
+                          [this, &parts](const tsdf::VoxelIndex& v) {
+                            const Label main = mainLabel(v);
+                            const Label part = groups_.partAt(v, main);
+                            if (part == main) return main;
+                            // An annexed voxel: the part it joined, through the merges since
+                            // (one of the object's parts; the object's first if that went
+                            // elsewhere).
+                            const Label now = resolve(part);
+                            return std::binary_search(parts.begin(), parts.end(), now)
+                                       ? now
+                                       : parts.front();
+                          }));
     segments.back().observation_depth_m = depth;
     segments.back().parts = parts;
   }

@@ -174,7 +174,7 @@ class Gsm {
   };
   absl::flat_hash_map<Label, ExtractedObject> extracted_objects_;
   int64_t grouped_frame_ = -1;  // the frame objects were last regrouped at
-  std::map<Label, std::vector<Label>> groups_;  // object id → parts, as then
+  ObjectGroups groups_;  // object id → parts (and annexed structure voxels), as then
   Label next_label_ = 1;
   int64_t frame_ = 0;
   std::vector<Eigen::Vector3f> camera_positions_;  // world, one per integrated frame

@@ -7,6 +7,8 @@
 
 #include <Eigen/Eigenvalues>
 
+#include "core/common/grid_key.h"
+
 namespace objdb::gsm {
 namespace {
 
@@ -24,6 +26,7 @@ struct Shape {
   Eigen::Vector3f normal = Eigen::Vector3f::UnitZ();  // thinnest axis, towards the observed side
   Eigen::Vector3f axis[2] = {Eigen::Vector3f::UnitX(), Eigen::Vector3f::UnitY()};  // in-plane
   float extent[2] = {0.0f, 0.0f};  // along axis[]: √12·σ (a uniform slab's width)
+  float thickness = 0.0f;          // σ along the normal, voxels
   bool planar = false;
   bool structure = false;
 };
@@ -80,6 +83,7 @@ void deriveShape(float voxel, float structure_extent_m, Shape* s) {
   s->axis[1] = eig.eigenvectors().col(1).cast<float>();
   s->extent[0] = float(std::sqrt(12.0) * sigma(2));
   s->extent[1] = float(std::sqrt(12.0) * sigma(1));
+  s->thickness = float(sigma(0) / double(voxel));
   s->planar = s->n >= 20 && sigma(0) <= std::max(1.5 * double(voxel), 0.1 * sigma(1));
   s->structure = s->planar && s->extent[1] >= structure_extent_m;
 }
@@ -150,6 +154,171 @@ bool restsOn(const Shape& upper, const Shape& support_shape,
     }
   }
   return sides == 4 || (sides == 3 && small);
+}
+
+// The 26 voxels around a voxel.
+const std::array<Eigen::Vector3i, 26>& neighbours26() {
+  static const std::array<Eigen::Vector3i, 26> offsets = [] {
+    std::array<Eigen::Vector3i, 26> o;
+    size_t n = 0;
+    for (int z = -1; z <= 1; ++z) {
+      for (int y = -1; y <= 1; ++y) {
+        for (int x = -1; x <= 1; ++x) {
+          if (x != 0 || y != 0 || z != 0) o[n++] = Eigen::Vector3i(x, y, z);
+        }
+      }
+    }
+    return o;
+  }();
+  return offsets;
+}
+
+// The voxels of structure label `structure` standing off its plane that objects take (see
+// objects.h), appended to out->annexed / annexed_part. `out` has members and object_of already.
+void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::VoxelIndex>& voxels,
+               const absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>>& voxels_of,
+               const LabelLookup& lookup, const tsdf::TsdfLayer& layer,
+               const std::vector<Eigen::Vector3i>& touching, float max_height, ObjectGroups* out) {
+  // Heights of the surface each voxel holds above the plane, in voxels: the voxel centre's less
+  // its TSDF distance (the surface lies that far below a voxel on the observed side), so the
+  // lattice does not quantise them. A floor's own voxels are then at its noise, a base disc 3 cm
+  // above it at 1.5 voxels (2 cm), whichever layers of voxels the floor falls into.
+  const float inv = 1.0f / layer.voxelSize();
+  std::vector<float> heights(voxels.size(), 0.0f);
+  double sum = 0.0, sum2 = 0.0;
+  for (size_t i = 0; i < voxels.size(); ++i) {
+    const tsdf::TsdfVoxel* t = layer.voxel(voxels[i]);
+    const float d = t != nullptr && t->weight > 0.0f ? t->distance * inv : 0.0f;
+    heights[i] = (voxels[i].cast<float>() - plane.centroid).dot(plane.normal) - d;
+    sum += heights[i];
+    sum2 += double(heights[i]) * heights[i];
+  }
+  if (voxels.empty()) return;
+  const double mean = sum / double(voxels.size());
+  const float spread = float(std::sqrt(std::max(0.0, sum2 / double(voxels.size()) - mean * mean)));
+  const float min_height = std::max(1.0f, 2.0f * spread);
+  if (max_height <= min_height) return;
+  absl::flat_hash_set<uint64_t> off;
+  std::vector<tsdf::VoxelIndex> candidates;
+  for (size_t i = 0; i < voxels.size(); ++i) {
+    const float h = heights[i] - float(mean);
+    if (h > min_height && h <= max_height) {
+      off.insert(packGridKey(voxels[i]));
+      candidates.push_back(voxels[i]);
+    }
+  }
+  if (candidates.empty()) return;
+  // Each object's footprint on the plane (voxels), computed when first needed.
+  struct Box {
+    float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
+  };
+  absl::flat_hash_map<Label, Box> footprints;
+  const auto inside = [&](Label object, const tsdf::VoxelIndex& v) {
+    auto [it, fresh] = footprints.try_emplace(object);
+    Box& box = it->second;
+    if (fresh) {
+      for (const Label l : out->members.at(object)) {
+        const auto found = voxels_of.find(l);
+        if (found == voxels_of.end()) continue;
+        for (const auto& u : found->second) {
+          for (int a = 0; a < 2; ++a) {
+            const float x = u.cast<float>().dot(plane.axis[a]);
+            box.lo[a] = std::min(box.lo[a], x);
+            box.hi[a] = std::max(box.hi[a], x);
+          }
+        }
+      }
+    }
+    for (int a = 0; a < 2; ++a) {
+      const float x = v.cast<float>().dot(plane.axis[a]);
+      if (x < box.lo[a] - 1.0f || x > box.hi[a] + 1.0f) return false;
+    }
+    return true;
+  };
+  // Breadth first from every off-plane voxel next to an object's voxel, all at once.
+  absl::flat_hash_map<uint64_t, Label> part_of;
+  std::vector<std::pair<tsdf::VoxelIndex, Label>> queue;
+  for (const auto& v : candidates) {
+    for (const Eigen::Vector3i& o : touching) {
+      const Label l = lookup.at(v + o);
+      if (l == 0 || l == structure || out->structure.contains(l)) continue;
+      if (!inside(out->object_of.at(l), v)) continue;
+      part_of.emplace(packGridKey(v), l);
+      queue.emplace_back(v, l);
+      break;
+    }
+  }
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const auto [v, part] = queue[head];
+    const Label object = out->object_of.at(part);
+    for (const Eigen::Vector3i& o : neighbours26()) {
+      const tsdf::VoxelIndex n = v + o;
+      const uint64_t key = packGridKey(n);
+      if (!off.contains(key) || part_of.contains(key) || !inside(object, n)) continue;
+      part_of.emplace(key, part);
+      queue.emplace_back(n, part);
+    }
+  }
+  for (const auto& [v, part] : queue) {
+    out->annexed[out->object_of.at(part)].push_back({v, part});
+    out->annexed_part[packGridKey(v)] = part;
+  }
+}
+
+// Shadow contacts (see objects.h): every label standing on a structure (touching it, on its
+// observed side; the structure it touches most) is probed from each of its voxels straight along
+// that structure's normal, up to `steps` voxels. The probe stops at the label's own voxels, at
+// observed free space (TSDF distance at least a voxel), at structure, and at another label; it
+// counts that label when it got there farther than `touching` voxels (nearer, they touch: the
+// contacts and the support rule decided) and through at least one voxel no camera observed.
+// Labels with at least `min_hits` such probes between them are united.
+template <typename Unite>
+void joinAcrossShadows(const absl::flat_hash_map<Label, Shape>& shapes,
+                       const absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>>& voxels_of,
+                       const absl::flat_hash_map<uint64_t, int64_t>& touches_structure,
+                       const LabelLookup& lookup, const tsdf::TsdfLayer& layer, int touching,
+                       int steps, int min_hits, ObjectGroups* out, const Unite& unite) {
+  // Each label's structure, in label order.
+  std::map<Label, std::pair<int64_t, Label>> standing_on;  // label → (voxels touching, structure)
+  for (const auto& [key, count] : touches_structure) {
+    const Label l = Label(key >> 32), m = Label(key & 0xffffffffULL);
+    if (count < min_hits) continue;
+    const Shape& floor = shapes.at(m);
+    if ((shapes.at(l).centroid - floor.centroid).dot(floor.normal) <= 0.0f) continue;
+    auto [it, fresh] = standing_on.try_emplace(l, count, m);
+    if (!fresh && (count > it->second.first || (count == it->second.first && m < it->second.second))) {
+      it->second = {count, m};
+    }
+  }
+  const float voxel = layer.voxelSize();
+  std::map<uint64_t, int> hits;  // packPair → probes
+  for (const auto& [l, on] : standing_on) {
+    const Eigen::Vector3f up = shapes.at(on.second).normal;
+    for (const tsdf::VoxelIndex& v : voxels_of.at(l)) {
+      bool unobserved = false;
+      for (int k = 1; k <= steps; ++k) {
+        const tsdf::VoxelIndex q =
+            (v.cast<float>() + float(k) * up).array().round().cast<int>().matrix();
+        const Label m = lookup.at(q);
+        if (m == l) break;
+        if (m != 0) {
+          if (k > touching && unobserved && !out->structure.contains(m)) ++hits[packPair(l, m)];
+          break;
+        }
+        const tsdf::TsdfVoxel* t = layer.voxel(q);
+        if (t != nullptr && t->weight > 0.0f) {
+          if (t->distance >= voxel) break;  // seen free
+        } else {
+          unobserved = true;
+        }
+      }
+    }
+  }
+  for (const auto& [key, n] : hits) {
+    if (n < min_hits) continue;
+    unite(Label(key >> 32), Label(key & 0xffffffffULL));
+    ++out->shadow_joins;
+  }
 }
 
 Label findRoot(absl::flat_hash_map<Label, Label>* parent, Label l) {
@@ -223,6 +392,8 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
   // Pass 2: contacts between labels that are not structure (structure never connects), each
   // side's voxels next to the other label listed once.
   absl::flat_hash_map<uint64_t, Contact> contacts;
+  // (label << 32 | structure label) → the label's voxels next to that structure.
+  absl::flat_hash_map<uint64_t, int64_t> touches_structure;
   for (const auto* entry : blocks) {
     const auto& [index, block] = *entry;
     // The 27 blocks around this one, so neighbours cost an array read, not a hash lookup.
@@ -260,7 +431,10 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       const tsdf::VoxelIndex v = index * vps + local;
       for (size_t k = 0; k < n_near; ++k) {
         const Label m = near[k];
-        if (out.structure.contains(m)) continue;
+        if (out.structure.contains(m)) {
+          ++touches_structure[(uint64_t(l) << 32) | m];
+          continue;
+        }
         Contact& c = contacts[packPair(l, m)];
         ++c.pairs;
         c.side[l < m ? 0 : 1].push_back(v);
@@ -326,6 +500,11 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       unite(upper, support);
     }
   }
+  if (params.object_shadow_gap_m > 0.0f) {
+    joinAcrossShadows(shapes, voxels_of, touches_structure, lookup, layer, r,
+                      int(std::floor(params.object_shadow_gap_m / voxel + 1e-3f)),
+                      params.object_min_contact_voxels, &out, unite);
+  }
   for (const auto& [l, s] : shapes) {
     Label root = findRoot(&parent, l);
     out.members[root].push_back(l);
@@ -335,7 +514,27 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     std::sort(members.begin(), members.end());
     for (const Label l : members) out.object_of[l] = id;
   }
+  if (params.object_annex_height_m > 0.0f) {
+    std::vector<Label> structure(out.structure.begin(), out.structure.end());
+    std::sort(structure.begin(), structure.end());
+    for (const Label l : structure) {
+      annexFrom(l, shapes[l], voxels_of[l], voxels_of, lookup, layer, offsets,
+                params.object_annex_height_m / voxel, &out);
+    }
+    for (auto& [id, annexed] : out.annexed) {
+      std::sort(annexed.begin(), annexed.end(), [](const AnnexedVoxel& a, const AnnexedVoxel& b) {
+        return std::tie(a.voxel.z(), a.voxel.y(), a.voxel.x()) <
+               std::tie(b.voxel.z(), b.voxel.y(), b.voxel.x());
+      });
+    }
+  }
   return out;
+}
+
+Label ObjectGroups::partAt(const tsdf::VoxelIndex& v, Label label) const {
+  if (annexed_part.empty() || !structure.contains(label)) return label;
+  const auto it = annexed_part.find(packGridKey(v));
+  return it == annexed_part.end() ? label : it->second;
 }
 
 }  // namespace objdb::gsm

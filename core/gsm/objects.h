@@ -21,6 +21,15 @@
 // while labels merge (the older label survives) and parts join it. The grouping is a function
 // of the map's main labels (the per-voxel label-count history decides them), recomputed from
 // them: merges and splits of objects lose nothing, the parts keep their labels.
+//
+// Structure does not keep everything it is labelled with: its voxels that stand off its plane on
+// the observed side (by more than a voxel and more than twice the plane's own spread, up to
+// GsmParams::object_annex_height_m), connected to an object's voxels and inside that object's
+// footprint on the plane (its extent along both in-plane axes, a voxel more), belong to that
+// object. A chair's or a table's base disc is 3 cm high: the segmenter finds no edge between it
+// and the floor, so its voxels are voted into the floor's label, but they stand off the floor's
+// plane. They join the object as part of the label they touch (breadth first from every
+// touching voxel at once, in voxel order), and leave the structure's segment.
 #pragma once
 
 #include <map>
@@ -36,12 +45,27 @@ namespace objdb::gsm {
 
 using LabelBlocks = absl::flat_hash_map<tsdf::BlockIndex, std::vector<Label>, tsdf::BlockIndexHash>;
 
+// A structure voxel an object takes (see above), as part `part` of the object.
+struct AnnexedVoxel {
+  tsdf::VoxelIndex voxel;
+  Label part = 0;
+};
+
 struct ObjectGroups {
   std::map<Label, std::vector<Label>> members;   // object id (its smallest label) → labels, sorted
   absl::flat_hash_map<Label, Label> object_of;   // label → object id
   absl::flat_hash_set<Label> structure;          // labels that are room structure
+  // Object id → the structure voxels it takes, in voxel order (z, y, x); and each such voxel
+  // (packGridKey) → its part.
+  std::map<Label, std::vector<AnnexedVoxel>> annexed;
+  absl::flat_hash_map<uint64_t, Label> annexed_part;
   size_t contacts = 0;  // label pairs that touch (neither structure)
   size_t supports = 0;  // of them, not connected because one rests on the other
+  size_t shadow_joins = 0;  // label pairs connected across a shadow
+
+  // The part a map voxel with main label `label` counts as: the annexing object's part for an
+  // annexed voxel, else `label` itself. The object is object_of of that.
+  Label partAt(const tsdf::VoxelIndex& v, Label label) const;
 };
 
 // Groups the labels of `labels` (main label per voxel of each block, 0 = none; `layer` gives the

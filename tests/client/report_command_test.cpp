@@ -28,8 +28,11 @@ TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   fs::copy(sessions / "monday", sessions / "tuesday", fs::copy_options::recursive);
   const fs::path db = dir / "objects.sqlite";
-  r = runProcess({kObjdb, "ingest", "--db", db.string(), sessions.string()});
+  // OBJDB_LOG_LEVEL=debug shows the database's reasons (a candidate rejected, a segment's class).
+  r = runProcess({"/usr/bin/env", "OBJDB_LOG_LEVEL=debug", kObjdb, "ingest", "--db", db.string(),
+                  sessions.string()});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_NE(r.err.find("[database] [debug] segment "), std::string::npos) << r.err;
   const fs::path sheet = dir / "merges.png";
   r = runProcess({kObjdb, "report", "merges", "--db", db.string(), "--out", sheet.string(),
                   (sessions / "monday").string(), "tuesday=" + (sessions / "tuesday").string()});
@@ -46,6 +49,12 @@ TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
   double brightest = 0;
   cv::minMaxLoc(tile.reshape(1), nullptr, &brightest);
   EXPECT_GT(brightest, 200);
+  // --min-segments 1: every model, the unmerged ones (the floor) too.
+  r = runProcess({kObjdb, "report", "merges", "--db", db.string(), "--out", sheet.string(),
+                  "--min-segments", "1", (sessions / "monday").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_EQ(r.out.find("2 models drawn"), std::string::npos) << r.out;
+  EXPECT_GT(cv::imread(sheet.string()).rows, 40 + 2 * 240);
 
   // Scored against the sessions' ground truth: both boxes merged across the sessions, nothing
   // else, the floor planar.
@@ -88,6 +97,12 @@ TEST(ReportCommand, BadArgumentsAndMissingInputsAreClearErrors) {
   EXPECT_NE(r.err.find("none.sqlite"), std::string::npos) << r.err;
   r = runProcess({kObjdb, "report", "merges", "--max-rows", "0"});
   EXPECT_EQ(r.exit_code, 2);
+  r = runProcess({kObjdb, "report", "merges", "--min-segments", "0"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--min-segments must be a whole number >= 1"), std::string::npos) << r.err;
+  r = runProcess({"/usr/bin/env", "OBJDB_LOG_LEVEL=loud", kObjdb, "help"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("unknown OBJDB_LOG_LEVEL \"loud\""), std::string::npos) << r.err;
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/common/grid_key.h"
 #include "core/gsm/gsm.h"
 #include "core/sim/renderer.h"
 #include "core/sim/shapes.h"
@@ -45,6 +46,14 @@ class Scene {
       }
     }
   }
+  // A pedestal chair as the lounge has them: a seat disc (first id) on a thin column (+1) on a
+  // base disc 3 cm high, which the segmenter cannot tell from the floor: it is segmented with
+  // the floor (instance 1). Seen from 1.6 m, the column's top is in the seat's shadow.
+  void addPedestalChair(const Eigen::Vector3d& at, uint16_t first_id) {
+    add(sim::makeCylinder(0.25f, 0.03f), at, 1);
+    add(sim::makeCylinder(0.035f, 0.42f, 16), at + Eigen::Vector3d(0, 0, 0.03), uint16_t(first_id + 1));
+    add(sim::makeCylinder(0.23f, 0.05f), at + Eigen::Vector3d(0, 0, 0.43), first_id);
+  }
   // A table 1.0 × 0.7 m, 0.74 m high: top (first id), four legs (+1 … +4).
   void addTable(const Eigen::Vector3d& at, uint16_t first_id) {
     addBox({1.0f, 0.7f, 0.04f}, at + Eigen::Vector3d(0, 0, 0.72), first_id);
@@ -57,10 +66,11 @@ class Scene {
   }
 
   // Fuses the scene seen from `frames` cameras on a circle around `centre` (radius 2.2 m,
-  // 1.6 m high) and returns the global label of each instance. With `only`, the other instances
-  // are fused as surface but get no segment.
+  // `height` high) and returns the global label of each instance. With `only`, the other
+  // instances are fused as surface but get no segment.
   std::map<uint16_t, Label> fuse(Gsm* gsm, const Eigen::Vector3d& centre, int frames = 16,
-                                 double phase = 0.0, const std::set<uint16_t>& only = {}) const {
+                                 double phase = 0.0, const std::set<uint16_t>& only = {},
+                                 double height = 1.6) const {
     const Intrinsics k = Intrinsics::vga();
     const sim::Renderer renderer(k);
     sim::RenderOutput out;
@@ -70,7 +80,7 @@ class Scene {
     for (int f = 0; f < frames; ++f) {
       const double a = phase + 2.0 * M_PI * f / frames;
       const Transform T =
-          lookAt(centre + Eigen::Vector3d(2.2 * std::cos(a), 2.2 * std::sin(a), 1.6 - centre.z()),
+          lookAt(centre + Eigen::Vector3d(2.2 * std::cos(a), 2.2 * std::sin(a), height - centre.z()),
                  centre)
               .value();
       renderer.render(instances, T, &out);
@@ -264,6 +274,142 @@ TEST(Objects, AnObjectWhosePartsJoinAnOlderOneIsWithdrawnAndTheOlderReextracted)
   EXPECT_TRUE(parts.count(later.at(10))) << "the seat";
   EXPECT_EQ(gsm.takeWithdrawn(), std::vector<Label>{leg});
   EXPECT_TRUE(gsm.takeWithdrawn().empty()) << "once";
+}
+
+// The voxels of object `id` in the segments a flush extracts (map voxel indices), with parts.
+std::map<uint64_t, Label> extractedVoxels(Gsm* gsm, Label id) {
+  std::map<uint64_t, Label> out;
+  for (const RawSegment& s : gsm->extractIdle(true)) {
+    if (s.label != id) continue;
+    const tsdf::VoxelIndex origin =
+        (s.T_world_segment.translation() / double(gsm->tsdf().voxelSize())).array().round().cast<int>().matrix();
+    for (size_t i = 0; i < s.label_voxels.size(); ++i) {
+      out[packGridKey(s.label_voxels[i] + origin)] = s.voxel_parts[i];
+    }
+  }
+  return out;
+}
+
+// A map of one pedestal chair (seat 10, column 11) on the floor (1), and its objects.
+struct Grouped {
+  Scene scene;
+  Gsm gsm;
+  std::map<uint16_t, Label> label_of;
+  ObjectGroups groups;
+};
+Grouped pedestalChair(const GsmParams& params = {}) {
+  Grouped out{Scene(), makeGsm(params), {}, {}};
+  out.scene.addPedestalChair(Eigen::Vector3d::Zero(), 10);
+  out.label_of = out.scene.fuse(&out.gsm, Eigen::Vector3d(0, 0, 0.3));
+  out.groups = out.gsm.groupObjects();
+  return out;
+}
+
+TEST(Objects, APedestalChairIsOneObjectWithTheBaseTheFloorWasLabelledWith) {
+  Grouped map = pedestalChair();
+  Gsm& gsm = map.gsm;
+  const auto& label_of = map.label_of;
+  const ObjectGroups& g = map.groups;
+  const Label chair = objectOf(g, label_of, 10);
+  ASSERT_NE(chair, 0u);
+  EXPECT_EQ(objectOf(g, label_of, 11), chair) << "the column joins the seat across its shadow";
+  EXPECT_GE(g.shadow_joins, 1u);
+  // The base: floor-labelled voxels standing off the floor, inside the chair's footprint.
+  ASSERT_TRUE(g.annexed.count(chair));
+  const std::vector<AnnexedVoxel>& base = g.annexed.at(chair);
+  EXPECT_GE(base.size(), 150u) << "most of the base's top (a disc of 0.2 m², 490 voxels)";
+  for (const AnnexedVoxel& a : base) {
+    const Eigen::Vector3f c = gsm.tsdf().voxelCenter(a.voxel);
+    EXPECT_GT(c.z(), 0.0f);
+    EXPECT_LT(c.z(), 0.1f);
+    EXPECT_LT(c.head<2>().norm(), 0.25f + 0.05f);
+    EXPECT_EQ(gsm.mainLabel(a.voxel), label_of.at(1)) << "a floor voxel";
+    EXPECT_EQ(a.part, label_of.at(11)) << "joined as part of the column it touches";
+  }
+  // Extracted with the chair, as part of the column, and no longer with the floor.
+  const Label floor = objectOf(g, label_of, 1);
+  const std::map<uint64_t, Label> chair_voxels = extractedVoxels(&gsm, chair);
+  Grouped again = pedestalChair();
+  const std::map<uint64_t, Label> floor_voxels = extractedVoxels(&again.gsm, floor);
+  ASSERT_FALSE(floor_voxels.empty());
+  for (const AnnexedVoxel& a : base) {
+    const auto it = chair_voxels.find(packGridKey(a.voxel));
+    ASSERT_NE(it, chair_voxels.end());
+    EXPECT_EQ(it->second, label_of.at(11));
+    EXPECT_FALSE(floor_voxels.count(packGridKey(a.voxel)));
+  }
+  // The saved map's extraction (a restart) gives the same voxels and parts.
+  const auto from_saved = extractLabelled(gsm.tsdf(), gsm.mainLabelBlocks(), GsmParams{},
+                                          int(std::ceil(TsdfParams().truncation_voxels)),
+                                          gsm.frames());
+  bool found = false;
+  for (const auto& s : from_saved) {
+    if (s.label != chair) continue;
+    found = true;
+    EXPECT_EQ(s.label_voxels.size(), chair_voxels.size());
+    std::map<Label, size_t> parts;
+    for (const Label p : s.voxel_parts) ++parts[p];
+    EXPECT_GE(parts[label_of.at(11)], base.size());
+  }
+  EXPECT_TRUE(found);
+}
+
+TEST(Objects, WithoutTheShadowRuleThePedestalIsAnObjectOfItsOwn) {
+  GsmParams params;
+  params.object_shadow_gap_m = 0.0f;
+  const Grouped map = pedestalChair(params);
+  ASSERT_NE(objectOf(map.groups, map.label_of, 10), 0u);
+  EXPECT_NE(objectOf(map.groups, map.label_of, 11), objectOf(map.groups, map.label_of, 10));
+  EXPECT_EQ(map.groups.shadow_joins, 0u);
+}
+
+TEST(Objects, WithoutAnnexingTheBaseStaysWithTheFloor) {
+  GsmParams params;
+  params.object_annex_height_m = 0.0f;
+  const Grouped map = pedestalChair(params);
+  EXPECT_TRUE(map.groups.annexed.empty());
+  EXPECT_TRUE(map.groups.annexed_part.empty());
+}
+
+// A table (top 0.95 × 0.95 m at 0.70–0.74 m, instance 10, on four legs 11 … 14) with a post
+// (instance 30, 0.1 × 0.1 m, 0.45 m high) under the middle of its top. Seen from 2.5 m, the top's
+// shadow reaches down to ~0.2 m there: the post's upper half and the 0.25 m above it are never
+// seen (0.5 m of shadow between what is seen of both), and the post touches nothing but the
+// floor.
+Scene tableOverPost() {
+  Scene scene;
+  scene.addBox({0.95f, 0.95f, 0.04f}, Eigen::Vector3d(0, 0, 0.72), 10);
+  uint16_t leg = 11;
+  for (const double x : {-0.45, 0.45}) {
+    for (const double y : {-0.45, 0.45}) {
+      scene.addBox({0.05f, 0.05f, 0.70f}, Eigen::Vector3d(x, y, 0.35), leg++);
+    }
+  }
+  scene.addBox({0.1f, 0.1f, 0.45f}, Eigen::Vector3d(0, 0, 0.225), 30);
+  return scene;
+}
+
+TEST(Objects, APostUnderATableTopStaysItsOwnObject) {
+  // Farther below the top than object_shadow_gap_m: 0.5 m of shadow between the post and the top.
+  const Scene scene = tableOverPost();
+  Gsm gsm = makeGsm();
+  const auto label_of = scene.fuse(&gsm, Eigen::Vector3d(0, 0, 0.5), 16, 0.0, {}, 2.5);
+  const ObjectGroups g = gsm.groupObjects();
+  const Label table = objectOf(g, label_of, 10), post = objectOf(g, label_of, 30);
+  ASSERT_NE(table, 0u);
+  ASSERT_NE(post, 0u);
+  EXPECT_NE(post, table);
+}
+
+TEST(Objects, ALongerShadowGapWouldJoinThePostToTheTable) {
+  // The gap is what keeps them apart: at 0.6 m the probe from the post reaches the top.
+  const Scene scene = tableOverPost();
+  GsmParams params;
+  params.object_shadow_gap_m = 0.6f;
+  Gsm gsm = makeGsm(params);
+  const auto label_of = scene.fuse(&gsm, Eigen::Vector3d(0, 0, 0.5), 16, 0.0, {}, 2.5);
+  const ObjectGroups g = gsm.groupObjects();
+  EXPECT_EQ(objectOf(g, label_of, 30), objectOf(g, label_of, 10));
 }
 
 }  // namespace
