@@ -119,6 +119,7 @@ TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
   // another placement of their kind at another place.
   std::map<std::string, std::set<int64_t>> models_of_object;
   std::map<std::string, std::set<std::string>> objects_of_kind;
+  std::map<std::string, std::set<int64_t>> models_of_kind;
   for (size_t r = 0; r < rows.size(); ++r) {
     const Row& row = rows[r];
     if (row.summary.planar || row.summary.structure) continue;
@@ -127,6 +128,7 @@ TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
       if (t.kind.empty() || t.structure) continue;
       models_of_object[t.object].insert(row.summary.id);
       objects_of_kind[t.kind].insert(t.object);
+      models_of_kind[t.kind].insert(row.summary.id);
       if (mergeable_per_kind[t.kind] < 2) continue;
       ++s.repeated;
       // Another placement of its kind elsewhere: one surface under two GSM labels at one place
@@ -144,7 +146,7 @@ TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
     size_t models = 0;
     for (const auto& id : ids) models += models_of_object[id].size();
     s.kinds.push_back({kind, ids.size(), mergeable_per_kind[kind],
-                       double(models) / double(ids.size())});
+                       double(models) / double(ids.size()), models_of_kind[kind].size()});
   }
   return s;
 }
@@ -174,10 +176,13 @@ void printTruthScore(const TruthScore& s) {
                        : absl::StrFormat("%.0f %% (%d of %d)",
                                          100.0 * double(s.with_kind) / double(s.repeated),
                                          s.with_kind, s.repeated));
-  std::printf("\n%-22s %8s %10s %14s\n", "kind", "objects", "segments", "models/object");
+  // models: how many models the kind ends in over all sessions (issue 18: at most 2 for a
+  // chair kind); models/object: how many models hold each object's segments, on average.
+  std::printf("\n%-22s %8s %10s %8s %14s\n", "kind", "objects", "segments", "models",
+              "models/object");
   for (const auto& k : s.kinds) {
-    std::printf("%-22s %8zu %10zu %14.2f\n", k.kind.c_str(), k.objects, k.segments,
-                k.models_per_object);
+    std::printf("%-22s %8zu %10zu %8zu %14.2f\n", k.kind.c_str(), k.objects, k.segments,
+                k.models, k.models_per_object);
   }
 }
 

@@ -44,6 +44,8 @@ struct TruthScore {
     std::string kind;
     size_t objects = 0, segments = 0;
     double models_per_object = 0.0;
+    size_t models = 0;  // distinct models holding the kind's mergeable segments, all sessions
+
   };
   std::vector<Kind> kinds;  // by name
 };

@@ -2,7 +2,7 @@
 // this process on a new database, streams the datasets through it exactly as `objdb stream` does
 // (one session each, online inserts, the live scene check, per-extraction replacement), ends the
 // sessions, and scores what the database holds: against ground truth where every dataset has it
-// (the paper's table and models per true object by kind), and for every dataset the structure
+// (the paper's table and the models each kind ends in and per true object), and for every dataset the structure
 // merges (placements on the scenes' dominant planes inside models of two or more segments), with
 // the database's time per stage (paper Table II: P, K, D, MR, MV, SV).
 #include <chrono>
@@ -41,7 +41,7 @@ gives each), then scores the database:
   - with ground truth (every dataset has instances/ and objects.json): placements, mergeable,
     models, models from >= 2 segments, erroneous merges (kinds differ), structure merges (true
     floor or wall in a model of >= 2), the share of repeated kinds' mergeable segments sharing a
-    model with their kind at another place, and models per true object by kind;
+    model with their kind at another place, and the models each kind ends in and per true object;
   - always: the scenes' dominant planes (of the 8 largest planes per session, those holding
     >= 2 % of its surface, their connected faces of >= 1 m²), the placements lying on them, and
     the structure merges (such a placement in a model at >= 2 places);
