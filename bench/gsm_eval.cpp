@@ -213,8 +213,9 @@ int main(int argc, char** argv) {
           best = std::max(best, c);
           parts += c * 10 > n ? 1 : 0;
           if (c * 10 > n) {
-            big += absl::StrFormat("%s%u %.2f%s", big.empty() ? "" : ", ", l, double(c) / double(n),
-                                   majority_of[l] == id ? "" : absl::StrFormat(" of %d", majority_of[l]));
+            big += absl::StrFormat(
+                "%s%u %.2f%s", big.empty() ? "" : ", ", l, double(c) / double(n),
+                majority_of[l] == id ? "" : absl::StrFormat(" of %d", majority_of[l]));
           }
           labelled += c;
           in_union += majority_of[l] == id ? c : 0;

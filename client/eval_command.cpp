@@ -2,9 +2,9 @@
 // this process on a new database, streams the datasets through it exactly as `objdb stream` does
 // (one session each, online inserts, the live scene check, per-extraction replacement), ends the
 // sessions, and scores what the database holds: against ground truth where every dataset has it
-// (the paper's table and the models each kind ends in and per true object), and for every dataset the structure
-// merges (placements on the scenes' dominant planes inside models of two or more segments), with
-// the database's time per stage (paper Table II: P, K, D, MR, MV, SV).
+// (the paper's table and the models each kind ends in and per true object), and for every dataset
+// the structure merges (placements on the scenes' dominant planes inside models of two or more
+// segments), with the database's time per stage (paper Table II: P, K, D, MR, MV, SV).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>

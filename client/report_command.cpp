@@ -52,7 +52,8 @@ depth-agreeing points fall on over all frames (none below 50 %), and the report 
 paper's table (placements, mergeable, models, models from >= 2 segments, erroneous merges:
 kinds differ, structure merges: floor or wall in a model of >= 2, the share of repeated kinds'
 mergeable segments that share a model with their kind at another place: two placements of one
-session within 5 cm are one object under two GSM labels) and the models each kind ends in and per true object.
+session within 5 cm are one object under two GSM labels) and, per kind, the models it ends in
+and the models per true object.
 
   --db FILE         the database (objdb-server's --db, or a backup of it)
   --out FILE.png    the sheet

@@ -286,7 +286,8 @@ void joinAcrossShadows(const absl::flat_hash_map<Label, Shape>& shapes,
     const Shape& floor = shapes.at(m);
     if ((shapes.at(l).centroid - floor.centroid).dot(floor.normal) <= 0.0f) continue;
     auto [it, fresh] = standing_on.try_emplace(l, count, m);
-    if (!fresh && (count > it->second.first || (count == it->second.first && m < it->second.second))) {
+    if (!fresh &&
+        (count > it->second.first || (count == it->second.first && m < it->second.second))) {
       it->second = {count, m};
     }
   }

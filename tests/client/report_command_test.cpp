@@ -74,7 +74,8 @@ TEST(ReportCommand, DrawsOneRowPerMergedModelWithEveryPlacementSeen) {
   EXPECT_NE(large_box, "(missing)") << r.out;
   int objects = 0, segments = 0, models = 0;
   double per_object = 0;
-  ASSERT_EQ(std::sscanf(large_box.c_str(), "%d %d %d %lf", &objects, &segments, &models, &per_object), 4)
+  ASSERT_EQ(
+      std::sscanf(large_box.c_str(), "%d %d %d %lf", &objects, &segments, &models, &per_object), 4)
       << large_box;
   EXPECT_EQ(objects, 2);
   EXPECT_EQ(models, 1) << r.out;

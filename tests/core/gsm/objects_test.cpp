@@ -51,7 +51,8 @@ class Scene {
   // the floor (instance 1). Seen from 1.6 m, the column's top is in the seat's shadow.
   void addPedestalChair(const Eigen::Vector3d& at, uint16_t first_id) {
     add(sim::makeCylinder(0.25f, 0.03f), at, 1);
-    add(sim::makeCylinder(0.035f, 0.42f, 16), at + Eigen::Vector3d(0, 0, 0.03), uint16_t(first_id + 1));
+    add(sim::makeCylinder(0.035f, 0.42f, 16), at + Eigen::Vector3d(0, 0, 0.03),
+        uint16_t(first_id + 1));
     add(sim::makeCylinder(0.23f, 0.05f), at + Eigen::Vector3d(0, 0, 0.43), first_id);
   }
   // A table 1.0 × 0.7 m, 0.74 m high: top (first id), four legs (+1 … +4).
@@ -282,7 +283,11 @@ std::map<uint64_t, Label> extractedVoxels(Gsm* gsm, Label id) {
   for (const RawSegment& s : gsm->extractIdle(true)) {
     if (s.label != id) continue;
     const tsdf::VoxelIndex origin =
-        (s.T_world_segment.translation() / double(gsm->tsdf().voxelSize())).array().round().cast<int>().matrix();
+        (s.T_world_segment.translation() / double(gsm->tsdf().voxelSize()))
+            .array()
+            .round()
+            .cast<int>()
+            .matrix();
     for (size_t i = 0; i < s.label_voxels.size(); ++i) {
       out[packGridKey(s.label_voxels[i] + origin)] = s.voxel_parts[i];
     }
