@@ -90,12 +90,14 @@ struct GsmParams {
   // (core/gsm/objects.h). 0 = off.
   float object_annex_height_m = 0.1f;
   // Two labels also connect across a gap the cameras never saw into, up to this long, straight
-  // along the normal of the structure the lower one stands on (core/gsm/objects.h): a pedestal
-  // under a seat or a table top, whose top is in their shadow. 0 = off. Measured on the lounge
+  // along the normal of the structure the lower one stands on, when the upper one's object
+  // floats (core/gsm/objects.h): a pedestal under a seat or a table top, whose top is in their
+  // shadow. 0 = off. Measured on the lounge
   // (objdb eval, three sessions): 0.2 m joins the chairs' pedestals but leaves the round tables'
   // in two sessions apart (2.0 models per table, recall 85 %, completion +5.3); 0.3 m joins
-  // them too (1.0, 89 %, +5.5; 0 erroneous merges both). A seat pushed under a table top, in
-  // its shadow and less than 0.3 m below it, joins the table, as one touching it does.
+  // them too (1.0, 87–89 %, +5.5; 0 erroneous merges both). Only an object that floats (touches
+  // no structure, rests on no support) is joined so: a chair pushed under a desk that stands
+  // on its own legs stays apart (SUN3D fragment 1 has one).
   float object_shadow_gap_m = 0.3f;
   int object_update_frames = 10;
   Status validate() const;

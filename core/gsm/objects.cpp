@@ -270,14 +270,18 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
 // that structure's normal, up to `steps` voxels. The probe stops at the label's own voxels, at
 // observed free space (TSDF distance at least a voxel), at structure, and at another label; it
 // counts that label when it got there farther than `touching` voxels (nearer, they touch: the
-// contacts and the support rule decided) and through at least one voxel no camera observed.
-// Labels with at least `min_hits` such probes between them are united.
-template <typename Unite>
+// contacts and the support rule decided), through at least one voxel no camera observed, and
+// when that label's object floats (`floating`: as grouped so far it neither touches structure
+// nor rests on a support, so something unseen must carry it). Labels with at least `min_hits`
+// such probes between them are united. A desk stands on its own legs: a chair pushed under it,
+// its armrests a few centimetres below the top, stays apart.
+template <typename Floating, typename Unite>
 void joinAcrossShadows(const absl::flat_hash_map<Label, Shape>& shapes,
                        const absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>>& voxels_of,
                        const absl::flat_hash_map<uint64_t, int64_t>& touches_structure,
                        const LabelLookup& lookup, const tsdf::TsdfLayer& layer, int touching,
-                       int steps, int min_hits, ObjectGroups* out, const Unite& unite) {
+                       int steps, int min_hits, const Floating& floating, ObjectGroups* out,
+                       const Unite& unite) {
   // Each label's structure, in label order.
   std::map<Label, std::pair<int64_t, Label>> standing_on;  // label → (voxels touching, structure)
   for (const auto& [key, count] : touches_structure) {
@@ -303,7 +307,9 @@ void joinAcrossShadows(const absl::flat_hash_map<Label, Shape>& shapes,
         const Label m = lookup.at(q);
         if (m == l) break;
         if (m != 0) {
-          if (k > touching && unobserved && !out->structure.contains(m)) ++hits[packPair(l, m)];
+          if (k > touching && unobserved && !out->structure.contains(m) && floating(m)) {
+            ++hits[packPair(l, m)];
+          }
           break;
         }
         const tsdf::TsdfVoxel* t = layer.voxel(q);
@@ -502,9 +508,20 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     }
   }
   if (params.object_shadow_gap_m > 0.0f) {
+    // The objects (roots) standing on something: touching structure, or resting on a support.
+    absl::flat_hash_set<Label> grounded;
+    for (const auto& [key, count] : touches_structure) {
+      if (count >= params.object_min_contact_voxels) grounded.insert(findRoot(&parent, Label(key >> 32)));
+    }
+    for (const auto& [upper, support] : supported) {
+      if (findRoot(&parent, upper) != findRoot(&parent, support)) {
+        grounded.insert(findRoot(&parent, upper));
+      }
+    }
+    const auto floating = [&](Label l) { return !grounded.contains(findRoot(&parent, l)); };
     joinAcrossShadows(shapes, voxels_of, touches_structure, lookup, layer, r,
                       int(std::floor(params.object_shadow_gap_m / voxel + 1e-3f)),
-                      params.object_min_contact_voxels, &out, unite);
+                      params.object_min_contact_voxels, floating, &out, unite);
   }
   for (const auto& [l, s] : shapes) {
     Label root = findRoot(&parent, l);

@@ -22,6 +22,13 @@
 // of the map's main labels (the per-voxel label-count history decides them), recomputed from
 // them: merges and splits of objects lose nothing, the parts keep their labels.
 //
+// Across a shadow (GsmParams::object_shadow_gap_m): a seat or a table top hides the top of the
+// column it stands on, so the two never touch. A label standing on a structure is probed along
+// that structure's normal; a probe that reaches another label through unobserved space (and no
+// observed free space), farther than touching and within the gap, connects the two when the
+// other's object floats: as grouped so far it touches no structure and rests on no support, so
+// something unseen must carry it. A desk on its own legs takes nothing across its shadow.
+//
 // Structure does not keep everything it is labelled with: its voxels that stand off its plane on
 // the observed side (by more than a voxel and more than twice the plane's own spread, up to
 // GsmParams::object_annex_height_m), connected to an object's voxels and inside that object's
