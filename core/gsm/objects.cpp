@@ -156,6 +156,28 @@ bool restsOn(const Shape& upper, const Shape& support_shape,
   return sides == 4 || (sides == 3 && small);
 }
 
+// The extent of `labels`' voxels (voxel units, lowest and highest) along the two in-plane axes
+// of `plane`.
+struct PlaneExtent {
+  float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
+};
+PlaneExtent extentAlong(const Shape& plane, const std::vector<Label>& labels,
+                        const absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>>& voxels_of) {
+  PlaneExtent e;
+  for (const Label l : labels) {
+    const auto found = voxels_of.find(l);
+    if (found == voxels_of.end()) continue;
+    for (const auto& v : found->second) {
+      for (int a = 0; a < 2; ++a) {
+        const float x = v.cast<float>().dot(plane.axis[a]);
+        e.lo[a] = std::min(e.lo[a], x);
+        e.hi[a] = std::max(e.hi[a], x);
+      }
+    }
+  }
+  return e;
+}
+
 // The 26 voxels around a voxel.
 const std::array<Eigen::Vector3i, 26>& neighbours26() {
   static const std::array<Eigen::Vector3i, 26> offsets = [] {
@@ -209,26 +231,13 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
   }
   if (candidates.empty()) return;
   // Each object's footprint on the plane (voxels), computed when first needed.
-  struct Box {
-    float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
-  };
-  absl::flat_hash_map<Label, Box> footprints;
+  absl::flat_hash_map<Label, PlaneExtent> footprints;
   const auto inside = [&](Label object, const tsdf::VoxelIndex& v) {
-    auto [it, fresh] = footprints.try_emplace(object);
-    Box& box = it->second;
-    if (fresh) {
-      for (const Label l : out->members.at(object)) {
-        const auto found = voxels_of.find(l);
-        if (found == voxels_of.end()) continue;
-        for (const auto& u : found->second) {
-          for (int a = 0; a < 2; ++a) {
-            const float x = u.cast<float>().dot(plane.axis[a]);
-            box.lo[a] = std::min(box.lo[a], x);
-            box.hi[a] = std::max(box.hi[a], x);
-          }
-        }
-      }
+    auto it = footprints.find(object);
+    if (it == footprints.end()) {
+      it = footprints.emplace(object, extentAlong(plane, out->members.at(object), voxels_of)).first;
     }
+    const PlaneExtent& box = it->second;
     for (int a = 0; a < 2; ++a) {
       const float x = v.cast<float>().dot(plane.axis[a]);
       if (x < box.lo[a] - 1.0f || x > box.hi[a] + 1.0f) return false;
@@ -485,20 +494,14 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     const Label ru = findRoot(&parent, upper), rs = findRoot(&parent, support);
     if (ru == rs) continue;
     const Shape& sb = shapes[support];
-    float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
+    std::vector<Label> resting;  // the labels of the resting object
     for (const auto& [l, unused] : shapes) {
-      if (findRoot(&parent, l) != ru) continue;  // not in the resting object
-      for (const auto& v : voxels_of[l]) {
-        for (int axis = 0; axis < 2; ++axis) {
-          const float x = v.cast<float>().dot(sb.axis[axis]);
-          lo[axis] = std::min(lo[axis], x);
-          hi[axis] = std::max(hi[axis], x);
-        }
-      }
+      if (findRoot(&parent, l) == ru) resting.push_back(l);
     }
+    const PlaneExtent e = extentAlong(sb, resting, voxels_of);
     bool smaller = true;
     for (int axis = 0; axis < 2; ++axis) {
-      smaller = smaller && (hi[axis] - lo[axis] + 1.0f) * voxel <=
+      smaller = smaller && (e.hi[axis] - e.lo[axis] + 1.0f) * voxel <=
                                params.object_support_max_ratio * sb.extent[axis];
     }
     if (smaller) {
@@ -538,12 +541,6 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     for (const Label l : structure) {
       annexFrom(l, shapes[l], voxels_of[l], voxels_of, lookup, layer, offsets,
                 params.object_annex_height_m / voxel, &out);
-    }
-    for (auto& [id, annexed] : out.annexed) {
-      std::sort(annexed.begin(), annexed.end(), [](const AnnexedVoxel& a, const AnnexedVoxel& b) {
-        return std::tie(a.voxel.z(), a.voxel.y(), a.voxel.x()) <
-               std::tie(b.voxel.z(), b.voxel.y(), b.voxel.x());
-      });
     }
   }
   return out;

@@ -62,8 +62,8 @@ struct ObjectGroups {
   std::map<Label, std::vector<Label>> members;   // object id (its smallest label) → labels, sorted
   absl::flat_hash_map<Label, Label> object_of;   // label → object id
   absl::flat_hash_set<Label> structure;          // labels that are room structure
-  // Object id → the structure voxels it takes, in voxel order (z, y, x); and each such voxel
-  // (packGridKey) → its part.
+  // Object id → the structure voxels it takes, in the (deterministic) order they were taken; and
+  // each such voxel (packGridKey) → its part.
   std::map<Label, std::vector<AnnexedVoxel>> annexed;
   absl::flat_hash_map<uint64_t, Label> annexed_part;
   size_t contacts = 0;  // label pairs that touch (neither structure)
