@@ -293,6 +293,12 @@ int main(int argc, char** argv) {
                       c.accepted ? "accepted" : c.stage.c_str(),
                       c.accepted ? "" : (": " + c.reason).c_str(), numbers.c_str());
         }
+        for (const auto& c : report->co_accepted) {
+          std::printf("    model %lld (took the segment too) %s model %lld%s%s\n",
+                      (long long)c.model_id, c.accepted ? "merged into" : "kept apart from",
+                      (long long)report->model_id, c.accepted ? "" : ": ",
+                      c.accepted ? "" : (c.stage + ": " + c.reason).c_str());
+        }
       }
       planar += report->planar ? 1 : 0;
       mergeable += report->matchable ? 1 : 0;

@@ -123,7 +123,7 @@ int runIngestCommand(int argc, char** argv) {
       return cli::reportError(kCommand, begun.status());
     }
     std::printf("session %s: %zu frames from %s\n", name.c_str(), ds.size(), path.c_str());
-    size_t inserted = 0, merged = 0, skipped = 0, withdrawn_count = 0;
+    size_t inserted = 0, merged = 0, joined = 0, skipped = 0, withdrawn_count = 0;
     auto insert = [&](std::vector<gsm::RawSegment> segments,
                       std::vector<gsm::Label> withdrawn) -> Status {
       for (const gsm::Label label : withdrawn) {  // before the survivors' new segments
@@ -151,6 +151,7 @@ int runIngestCommand(int argc, char** argv) {
         }
         ++inserted;
         merged += report->merged ? 1 : 0;
+        joined += report->absorbed.size();
       }
       return absl::OkStatus();
     };
@@ -169,8 +170,9 @@ int runIngestCommand(int argc, char** argv) {
     if (!finished.ok()) return cli::reportError(kCommand, finished);
     const auto ids = (*store)->modelIds();
     std::printf("  %zu frames (%zu skipped), %zu raw segments inserted (%zu merged into earlier "
-                "models, %zu without surface skipped, %zu withdrawn); %zu models in the database\n",
-                looped->used, looped->rejected, inserted, merged, skipped, withdrawn_count,
+                "models, %zu without surface skipped, %zu withdrawn); %zu models merged into "
+                "others; %zu models in the database\n",
+                looped->used, looped->rejected, inserted, merged, skipped, withdrawn_count, joined,
                 ids.ok() ? ids->size() : size_t(0));
   }
   if (Status s = (*store)->checkpoint(); !s.ok()) return cli::reportError(kCommand, s);

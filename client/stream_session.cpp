@@ -20,7 +20,7 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
 
   // The reader: acks drive the progress bar; rejections and (with -v) events are printed.
   std::mutex print_mutex;
-  size_t acked = 0, rejected = 0, segments = 0, created = 0, merged = 0;
+  size_t acked = 0, rejected = 0, segments = 0, created = 0, merged = 0, joined = 0;
   v1::SessionSummary summary;
   ProgressBar bar("  segmenting, fusing, inserting on the server", frames);
   std::thread reader([&] {
@@ -47,7 +47,18 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
           }
           break;
         case v1::IngestResponse::kObject:
-          if (response.object().kind() == v1::ObjectEvent::MERGED) {
+          if (response.object().kind() == v1::ObjectEvent::MERGED &&
+              response.object().object_id() != 0) {
+            ++joined;
+            if (options.verbose) {
+              std::printf("  object %llu merged into object %llu (both took the segment; e_TSDF "
+                          "%.4f m, o_TSDF %llu)\n",
+                          (unsigned long long)response.object().object_id(),
+                          (unsigned long long)response.object().into_object_id(),
+                          response.object().evidence().tsdf_rmse_m(),
+                          (unsigned long long)response.object().evidence().overlap_voxels());
+            }
+          } else if (response.object().kind() == v1::ObjectEvent::MERGED) {
             ++merged;
             if (options.verbose) {
               std::printf(" merged into object %llu (e_TSDF %.4f m, o_TSDF %llu)\n",
@@ -103,8 +114,8 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   if (!load_error.ok()) return reportError(command, load_error);
   if (!status.ok()) return reportRpcError(command, "Ingest of session " + name, options.connection.server, status);
   std::printf("  %zu frames acked (%zu rejected), %zu segments into the database (%zu new objects, "
-              "%zu merged into earlier ones)\n",
-              acked, rejected, segments, created, merged);
+              "%zu merged into earlier ones; %zu objects merged into others)\n",
+              acked, rejected, segments, created, merged, joined);
   if (!options.end) {
     std::printf("  session %s left open (--no-end)\n", name.c_str());
     return 0;
@@ -120,10 +131,11 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   }
   const v1::SessionCounters& c = ended.summary().counters();
   std::printf("  ended: %llu frames integrated, %llu segments (%llu new objects, %llu merges, "
-              "%llu withdrawn); %d objects observed in the session\n",
+              "%llu withdrawn, %llu objects joined others); %d objects observed in the session\n",
               (unsigned long long)c.frames_integrated(), (unsigned long long)c.segments_extracted(),
               (unsigned long long)c.objects_created(), (unsigned long long)c.objects_merged(),
-              (unsigned long long)c.segments_withdrawn(), ended.summary().object_ids_size());
+              (unsigned long long)c.segments_withdrawn(), (unsigned long long)c.objects_joined(),
+              ended.summary().object_ids_size());
   return 0;
 }
 

@@ -540,6 +540,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     // As the events say: a segment merged, or a model created for it.
     if (report->merged) {
       c.set_objects_merged(c.objects_merged() + 1);
+      c.set_objects_joined(c.objects_joined() + report->absorbed.size());
     } else {
       c.set_objects_created(c.objects_created() + 1);
     }
@@ -567,33 +568,12 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     setVector(lo - half, e.mutable_bounds_world()->mutable_min());
     setVector(hi + half, e.mutable_bounds_world()->mutable_max());
   }
-  v1::IngestResponse event;
-  v1::ObjectEvent& o = *event.mutable_object();
-  o.set_segment_id(e.segment_id());
   stream->send(std::move(extracted));  // moves `e` away
-  if (report->merged) {
-    o.set_kind(v1::ObjectEvent::MERGED);
-    o.set_into_object_id(uint64_t(report->model_id));
-    for (const auto& r : report->results) {
-      if (!r.accepted || r.model_id != report->model_id) continue;
-      v1::MergeEvidence& ev = *o.mutable_evidence();
-      ev.set_icp_rmse_m(r.registration.icp_rmse);
-      ev.set_tsdf_rmse_m(r.model_verdict.agreement.rmse);
-      ev.set_overlap_voxels(r.model_verdict.agreement.overlap);
-      ev.set_non_overlap_voxels(r.model_verdict.agreement.compared -
-                                r.model_verdict.agreement.overlap);
-      *ev.mutable_t_into_merged() = toProto(r.registration.T_target_source);
-      ev.set_scene_checks(uint32_t(r.scene_checks));
-      ev.set_scene_rmse_max_m(r.scene_rmse_max);
-      ev.set_scene_overlap_min_voxels(r.scene_overlap_min);
-      ev.set_same_place(r.same_place);
-      break;
-    }
-  } else {
-    o.set_kind(v1::ObjectEvent::CREATED);
-    o.set_object_id(uint64_t(report->model_id));
+  for (v1::ObjectEvent& o : objectEvents(*report, segment_id.ok() ? uint64_t(*segment_id) : 0)) {
+    v1::IngestResponse event;
+    *event.mutable_object() = std::move(o);
+    stream->send(std::move(event));
   }
-  stream->send(std::move(event));
   return absl::OkStatus();
 }
 

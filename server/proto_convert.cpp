@@ -399,4 +399,45 @@ void toProto(const storage::ModelSummary& model, v1::ObjectSummary* out) {
   out->set_structure(model.structure);
 }
 
+void toProto(const database::CandidateResult& r, v1::MergeEvidence* ev) {
+  ev->set_icp_rmse_m(r.registration.icp_rmse);
+  ev->set_tsdf_rmse_m(r.model_verdict.agreement.rmse);
+  ev->set_overlap_voxels(r.model_verdict.agreement.overlap);
+  ev->set_non_overlap_voxels(r.model_verdict.agreement.compared - r.model_verdict.agreement.overlap);
+  *ev->mutable_t_into_merged() = toProto(r.registration.T_target_source);
+  ev->set_scene_checks(uint32_t(r.scene_checks));
+  ev->set_scene_rmse_max_m(r.scene_rmse_max);
+  ev->set_scene_overlap_min_voxels(r.scene_overlap_min);
+  ev->set_same_place(r.same_place);
+}
+
+std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
+                                          uint64_t segment_id) {
+  std::vector<v1::ObjectEvent> events(1);
+  v1::ObjectEvent& o = events.front();
+  o.set_segment_id(segment_id);
+  if (report.merged) {
+    o.set_kind(v1::ObjectEvent::MERGED);
+    o.set_into_object_id(uint64_t(report.model_id));
+    for (const auto& r : report.results) {
+      if (!r.accepted || r.model_id != report.model_id) continue;
+      toProto(r, o.mutable_evidence());
+      break;
+    }
+  } else {
+    o.set_kind(v1::ObjectEvent::CREATED);
+    o.set_object_id(uint64_t(report.model_id));
+  }
+  for (const auto& r : report.co_accepted) {
+    if (!r.accepted) continue;
+    v1::ObjectEvent& j = events.emplace_back();
+    j.set_kind(v1::ObjectEvent::MERGED);
+    j.set_object_id(uint64_t(r.model_id));
+    j.set_into_object_id(uint64_t(report.model_id));
+    j.set_segment_id(segment_id);
+    toProto(r, j.mutable_evidence());
+  }
+  return events;
+}
+
 }  // namespace objdb::server

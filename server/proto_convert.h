@@ -13,6 +13,7 @@
 #include "core/common/mesh.h"
 #include "core/common/status.h"
 #include "core/common/transform.h"
+#include "core/database/object_database.h"
 #include "objdb/v1/objdb.pb.h"
 #include "storage/sqlite_store.h"
 
@@ -61,5 +62,12 @@ double unixSeconds(const std::string& iso8601_utc);
 v1::SessionState toProto(storage::SessionState state);
 // The summary of a stored model (ListObjects, GetObject).
 void toProto(const storage::ModelSummary& model, v1::ObjectSummary* out);
+
+// A merge's evidence (the accepted candidate's numbers).
+void toProto(const database::CandidateResult& merge, v1::MergeEvidence* out);
+// What one insert did to the objects, as Ingest announces it: CREATED (a new object) or MERGED
+// (into an object), then one MERGED per existing object that joined the surviving one.
+std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
+                                          uint64_t segment_id);
 
 }  // namespace objdb::server

@@ -551,48 +551,88 @@ Status SqliteStore::writeObservations(int64_t model_id, const EncodedModel& mode
   return absl::OkStatus();
 }
 
+// Model `id`'s row and observations rewritten from `e`, with `merge` recorded when given. Runs
+// inside the caller's write transaction.
+Status SqliteStore::rewriteModel(const EncodedModel& e, int64_t id,
+                                 const database::MergeRecord* merge) {
+  std::string assignments;
+  for (const absl::string_view column : absl::StrSplit(kModelColumns, ", ")) {
+    absl::StrAppend(&assignments, column, " = ?, ");
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_, absl::StrFormat("UPDATE models SET %supdated_at = %s "
+                                                   "WHERE id = ? AND state = 'active'",
+                                                   assignments, kNow)));
+  bindModel(&s, e);
+  s.bind(kNumModelColumns + 1, id);
+  OBJDB_RETURN_IF_ERROR(s.run());
+  if (sqlite3_changes(writer_->get()) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to replace", id));
+  }
+  OBJDB_RETURN_IF_ERROR(writeObservations(id, e, /*replace=*/true));
+  if (merge == nullptr) return absl::OkStatus();
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement m,
+      Statement::prepare(*writer_,
+                         absl::StrFormat("INSERT INTO merge_records(target, source, transform, "
+                                         "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
+                                         "scene_checks, created_at) VALUES "
+                                         "(?, ?, ?, ?, ?, ?, ?, %s)",
+                                         kNow)));
+  m.bind(1, merge->target).bind(2, merge->source).bindBlob(3, encodeTransform(merge->T_target_source));
+  m.bind(4, merge->icp_rmse_m).bind(5, merge->tsdf_rmse_m);
+  m.bind(6, int64_t(merge->tsdf_overlap)).bind(7, int64_t(merge->scene_checks));
+  return m.run();
+}
+
 Status SqliteStore::replaceModel(model::ObjectModel model,
                                  const std::optional<database::MergeRecord>& merge) {
   const EncodedModel e = encodeModel(model, options_.blobs);
-  const std::string merge_transform = merge ? encodeTransform(merge->T_target_source) : "";
   std::lock_guard lock(write_mutex_);
   OBJDB_RETURN_IF_ERROR(requireWriter());
   auto body = [&]() -> Status {
     OBJDB_ASSIGN_OR_RETURN(Transaction txn,
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));
-    std::string assignments;
-    for (const absl::string_view column : absl::StrSplit(kModelColumns, ", ")) {
-      absl::StrAppend(&assignments, column, " = ?, ");
-    }
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement s,
-        Statement::prepare(*writer_, absl::StrFormat("UPDATE models SET %supdated_at = %s "
-                                                     "WHERE id = ? AND state = 'active'",
-                                                     assignments, kNow)));
-    bindModel(&s, e);
-    s.bind(kNumModelColumns + 1, model.id);
-    OBJDB_RETURN_IF_ERROR(s.run());
-    if (sqlite3_changes(writer_->get()) == 0) {
-      return absl::NotFoundError(absl::StrFormat("no object model %d to replace", model.id));
-    }
-    OBJDB_RETURN_IF_ERROR(writeObservations(model.id, e, /*replace=*/true));
-    if (merge) {
-      OBJDB_ASSIGN_OR_RETURN(
-          Statement m,
-          Statement::prepare(*writer_,
-                             absl::StrFormat("INSERT INTO merge_records(target, source, transform, "
-                                             "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
-                                             "scene_checks, created_at) VALUES "
-                                             "(?, ?, ?, ?, ?, ?, ?, %s)",
-                                             kNow)));
-      m.bind(1, merge->target).bind(2, merge->source).bindBlob(3, merge_transform);
-      m.bind(4, merge->icp_rmse_m).bind(5, merge->tsdf_rmse_m);
-      m.bind(6, int64_t(merge->tsdf_overlap)).bind(7, int64_t(merge->scene_checks));
-      OBJDB_RETURN_IF_ERROR(m.run());
-    }
+    OBJDB_RETURN_IF_ERROR(rewriteModel(e, model.id, merge ? &*merge : nullptr));
     return txn.commit();
   };
   return annotate(body(), absl::StrFormat("replacing object model %d", model.id));
+}
+
+Status SqliteStore::absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
+                                int64_t absorbed) {
+  const EncodedModel e = encodeModel(target, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    if (absorbed == target.id) {
+      return absl::InvalidArgumentError("a model cannot be merged into itself");
+    }
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    // The absorbed row stays for lineage (state merged, merged_into the target); its geometry
+    // and observations now live in the target.
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(*writer_,
+                           absl::StrFormat("UPDATE models SET state = 'merged', merged_into = ?, "
+                                           "grid = NULL, surface_voxels = NULL, cloud = NULL, "
+                                           "keypoints = NULL, descriptors = NULL, updated_at = %s "
+                                           "WHERE id = ? AND state = 'active'",
+                                           kNow)));
+    OBJDB_RETURN_IF_ERROR(s.bind(1, target.id).bind(2, absorbed).run());
+    if (sqlite3_changes(writer_->get()) == 0) {
+      return absl::NotFoundError(absl::StrFormat("no object model %d to merge", absorbed));
+    }
+    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                              *writer_, "DELETE FROM observations WHERE model_id = ?"));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, absorbed).run());
+    OBJDB_RETURN_IF_ERROR(rewriteModel(e, target.id, &merge));
+    return txn.commit();
+  };
+  return annotate(body(), absl::StrFormat("merging object model %d into object model %d", absorbed,
+                                          target.id));
 }
 
 Status SqliteStore::removeModel(int64_t id) {

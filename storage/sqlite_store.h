@@ -179,6 +179,8 @@ class SqliteStore : public database::ModelStore {
   StatusOr<int64_t> addModel(model::ObjectModel model) override;
   Status replaceModel(model::ObjectModel model,
                       const std::optional<database::MergeRecord>& merge) override;
+  Status absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
+                     int64_t absorbed) override;
   Status removeModel(int64_t id) override;
   StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
   StatusOr<std::vector<int64_t>> modelIds() const override;
@@ -235,6 +237,7 @@ class SqliteStore : public database::ModelStore {
       std::optional<int64_t> target) const;
   StatusOr<int64_t> sessionIdForWrite(const std::string& name);
   Status writeObservations(int64_t model_id, const EncodedModel& model, bool replace);
+  Status rewriteModel(const EncodedModel& e, int64_t id, const database::MergeRecord* merge);
   // A map (TSDF blocks, optional main labels) into `tables`, replacing the session's earlier one;
   // `frames` is kept where the tables have the column (saved maps).
   Status writeMap(const MapTables& tables, const std::string& session,

@@ -226,6 +226,12 @@ struct DatabaseParams {
   // accepted no further wave starts (0: evaluate all). Bounds the insert time when many stored
   // models are copies of one object; the waves keep the result independent of thread timing.
   int stop_after_accepted = 4;
+  // Models that each accepted the same segment hold one object: the segment merges into the
+  // best of them, and each other one is then registered onto the result (ICP from the transform
+  // the segment gives, T_best←segment · T_other←segment⁻¹), verified model to model and at every
+  // pose of both against its scene, and merged in when it passes (its state becomes merged).
+  // Parts of one chair kind that never overlapped each other join through a view covering both.
+  bool merge_co_accepted = true;
   int threads = 2;  // candidate registrations in parallel
   Status validate() const;
 };

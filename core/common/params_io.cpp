@@ -114,6 +114,7 @@ void forEachField(DatabaseParams& p, Fn&& fn) {
   fn("prefilter_min_votes", p.prefilter_min_votes);
   fn("max_candidates", p.max_candidates);
   fn("stop_after_accepted", p.stop_after_accepted);
+  fn("merge_co_accepted", p.merge_co_accepted);
   fn("threads", p.threads);
 }
 template <typename Fn>

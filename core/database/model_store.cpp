@@ -61,6 +61,23 @@ Status InMemoryModelStore::replaceModel(model::ObjectModel model,
   return absl::OkStatus();
 }
 
+Status InMemoryModelStore::absorbModel(model::ObjectModel target, const MergeRecord& merge,
+                                       int64_t absorbed) {
+  std::lock_guard lock(mutex_);
+  const auto it = models_.find(target.id);
+  if (it == models_.end()) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to merge into", target.id));
+  }
+  if (absorbed == target.id || models_.count(absorbed) == 0) {
+    return absl::NotFoundError(
+        absl::StrFormat("no object model %d to merge into model %d", absorbed, target.id));
+  }
+  it->second = std::make_shared<const model::ObjectModel>(std::move(target));
+  models_.erase(absorbed);
+  merges_.push_back(merge);
+  return absl::OkStatus();
+}
+
 Status InMemoryModelStore::removeModel(int64_t id) {
   std::lock_guard lock(mutex_);
   if (models_.erase(id) == 0) {

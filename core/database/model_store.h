@@ -83,6 +83,11 @@ class ModelStore {
   // Replaces model `model.id`; with a merge record in the same unit when given.
   virtual Status replaceModel(model::ObjectModel model,
                               const std::optional<MergeRecord>& merge) = 0;
+  // Model `absorbed` merged into model `target.id`, in one unit: `target` (holding both models'
+  // observations) replaces the stored model, `merge` is recorded, and `absorbed` leaves the
+  // active models (kept as merged into target.id where the store keeps lineage).
+  virtual Status absorbModel(model::ObjectModel target, const MergeRecord& merge,
+                             int64_t absorbed) = 0;
   virtual Status removeModel(int64_t id) = 0;
   virtual StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const = 0;
   // Ids of the stored (active) models, ascending.
@@ -111,6 +116,8 @@ class InMemoryModelStore : public ModelStore {
       const SegmentKey& key) const override;
   StatusOr<int64_t> addModel(model::ObjectModel model) override;
   Status replaceModel(model::ObjectModel model, const std::optional<MergeRecord>& merge) override;
+  Status absorbModel(model::ObjectModel target, const MergeRecord& merge,
+                     int64_t absorbed) override;
   Status removeModel(int64_t id) override;
   StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
   StatusOr<std::vector<int64_t>> modelIds() const override;

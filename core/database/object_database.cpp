@@ -245,6 +245,14 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
     result.reason = result.registration.reason;
     return result;
   }
+  verifyRegistered(incoming, candidate, live, timings, &result);
+  return result;
+}
+
+void ObjectDatabase::verifyRegistered(const model::ObjectModel& incoming,
+                                      const model::ObjectModel& candidate, const LiveScenes& live,
+                                      InsertTimings* timings, CandidateResult* out) {
+  CandidateResult& result = *out;
   const Transform& T_j_i = result.registration.T_target_source;
   const Transform T_i_j = T_j_i.inverse();
 
@@ -260,7 +268,7 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
   }
 
   // Model to model: t_i resampled into t_j's lattice.
-  t = Clock::now();
+  auto t = Clock::now();
   result.model_verdict = matching::judge(
       matching::compareGrids(candidate.grid, incoming.grid, T_j_i), params_.merging,
       candidate.grid.voxelSize());
@@ -268,7 +276,7 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
   if (!result.model_verdict.accepted) {
     result.stage = "model";
     result.reason = result.model_verdict.reason;
-    return result;
+    return;
   }
 
   // Model to scene: the merged grid at every pose of both models, against that session's map.
@@ -287,7 +295,7 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
       result.reason = absl::StrFormat("scene of session %s unreadable: %s", session,
                                       found.status().message());
       timings->scene_verify_ms += msSince(t);
-      return result;
+      return;
     }
     const std::shared_ptr<const tsdf::TsdfLayer> scene = *std::move(found);
     if (scene == nullptr) {
@@ -297,7 +305,7 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
           "session %s has no scene map (neither live nor stored) to verify the pose against",
           session);
       timings->scene_verify_ms += msSince(t);
-      return result;
+      return;
     }
     const matching::Verdict verdict =
         matching::judge(matching::compareGrids(merged, *scene, T_world_object.inverse()),
@@ -306,7 +314,7 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
       result.stage = "scene";
       result.reason = absl::StrFormat("scene of session %s: %s", session, verdict.reason);
       timings->scene_verify_ms += msSince(t);
-      return result;
+      return;
     }
     result.scene_rmse_max = std::max(result.scene_rmse_max, verdict.agreement.rmse);
     result.scene_overlap_min = result.scene_checks == 0
@@ -316,7 +324,92 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
   }
   timings->scene_verify_ms += msSince(t);
   result.accepted = true;
-  return result;
+}
+
+namespace {
+// `target`'s observations followed by `source`'s, brought into the target's frame by
+// T_target_source.
+std::vector<model::Observation> joinedObservations(const model::ObjectModel& target,
+                                                   const std::vector<model::Observation>& source,
+                                                   const Transform& T_target_source) {
+  std::vector<model::Observation> out = target.observations;
+  const Transform T_source_target = T_target_source.inverse();
+  for (const auto& o : source) {
+    out.push_back({o.session, o.label, o.T_world_object * T_source_target,
+                   T_target_source * o.T_object_segment});
+  }
+  return out;
+}
+
+MergeRecord mergeRecordOf(int64_t target, std::string source, const CandidateResult& r) {
+  MergeRecord merge;
+  merge.target = target;
+  merge.source = std::move(source);
+  merge.T_target_source = r.registration.T_target_source;
+  merge.icp_rmse_m = r.registration.icp_rmse;
+  merge.tsdf_rmse_m = r.model_verdict.agreement.rmse;
+  merge.tsdf_overlap = r.model_verdict.agreement.overlap;
+  merge.scene_checks = r.scene_checks;
+  return merge;
+}
+}  // namespace
+
+Status ObjectDatabase::absorbCoAccepted(
+    std::shared_ptr<const model::ObjectModel> merged, const CandidateResult& best,
+    const std::vector<std::shared_ptr<const model::ObjectModel>>& loaded, const LiveScenes& live,
+    InsertReport* report) {
+  for (size_t c = 0; c < report->results.size(); ++c) {
+    const CandidateResult& r = report->results[c];
+    if (!r.accepted || r.model_id == merged->id) continue;
+    const model::ObjectModel& other = *loaded[c];
+    // Both took the segment: T_merged←other = T_merged←segment · T_other←segment⁻¹, refined.
+    CandidateResult check;
+    check.model_id = other.id;
+    auto t = Clock::now();
+    check.registration = matching::refineRegistration(
+        other, *merged,
+        best.registration.T_target_source * r.registration.T_target_source.inverse(),
+        params_.matching);
+    report->timings.match_register_ms += msSince(t);
+    if (!check.registration.accepted) {
+      check.stage = "registration";
+      check.reason = check.registration.reason;
+    } else {
+      verifyRegistered(other, *merged, live, &report->timings, &check);
+    }
+    if (!check.accepted) {
+      logger("database")->debug("object {} not merged into object {} (both took the segment): "
+                                "rejected at the {} check: {}",
+                                other.id, merged->id, check.stage, check.reason);
+      report->co_accepted.push_back(std::move(check));
+      continue;
+    }
+    OBJDB_ASSIGN_OR_RETURN(
+        model::ObjectModel joined,
+        buildFromObservations(
+            joinedObservations(*merged, other.observations, check.registration.T_target_source),
+            merged->id));
+    std::vector<SegmentKey> keys;
+    for (const auto& o : joined.observations) keys.push_back(keyOf(o));
+    MatchEntry entry = matchEntryOf(joined);
+    auto next = std::make_shared<const model::ObjectModel>(std::move(joined));
+    OBJDB_RETURN_IF_ERROR(store_->absorbModel(
+        model::cloneModel(*next),
+        mergeRecordOf(merged->id, absl::StrFormat("model %d", other.id), check), other.id));
+    for (const auto& key : keys) segment_model_[key] = merged->id;
+    changed(other.id, std::nullopt);
+    changed(merged->id, std::move(entry));
+    logger("database")->info(
+        "object {} merged into object {}: both took one segment (e_ICP {:.4f} m, e_TSDF {:.4f} m, "
+        "o_TSDF {}; scene checks {}, worst e_TSDF {:.4f} m)",
+        other.id, merged->id, check.registration.icp_rmse, check.model_verdict.agreement.rmse,
+        check.model_verdict.agreement.overlap, check.scene_checks, check.scene_rmse_max);
+    check.accepted = true;
+    report->absorbed.push_back(other.id);
+    report->co_accepted.push_back(std::move(check));
+    merged = std::move(next);
+  }
+  return absl::OkStatus();
 }
 
 StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
@@ -458,25 +551,22 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   } else {
     const size_t slot = size_t(best - report.results.data());
     const model::ObjectModel& target = *loaded[slot];
-    const Transform& T_j_i = best->registration.T_target_source;
-    std::vector<model::Observation> observations = target.observations;
-    const Transform T_i_j = T_j_i.inverse();
-    for (const auto& o : incoming.observations) {
-      observations.push_back({o.session, o.label, o.T_world_object * T_i_j, T_j_i * o.T_object_segment});
-    }
-    OBJDB_ASSIGN_OR_RETURN(model::ObjectModel merged,
-                           buildFromObservations(std::move(observations), target.id));
-    MergeRecord merge;
-    merge.target = target.id;
-    merge.source = absl::StrFormat("segment %s/%d", session, segment.label);
-    merge.T_target_source = T_j_i;
-    merge.icp_rmse_m = best->registration.icp_rmse;
-    merge.tsdf_rmse_m = best->model_verdict.agreement.rmse;
-    merge.tsdf_overlap = best->model_verdict.agreement.overlap;
-    merge.scene_checks = best->scene_checks;
+    OBJDB_ASSIGN_OR_RETURN(
+        model::ObjectModel merged,
+        buildFromObservations(joinedObservations(target, incoming.observations,
+                                                 best->registration.T_target_source),
+                              target.id));
+    const MergeRecord merge =
+        mergeRecordOf(target.id, absl::StrFormat("segment %s/%d", session, segment.label), *best);
     std::vector<SegmentKey> keys;
     for (const auto& o : merged.observations) keys.push_back(keyOf(o));
     MatchEntry entry = matchEntryOf(merged);
+    size_t co_accepted = 0;
+    for (const auto& r : report.results) co_accepted += r.accepted ? 1 : 0;
+    std::shared_ptr<const model::ObjectModel> kept;
+    if (params_.database.merge_co_accepted && co_accepted > 1) {
+      kept = std::make_shared<const model::ObjectModel>(model::cloneModel(merged));
+    }
     // What this object knows changes only once the store has the merge: a failed write (I/O
     // error, full disk) leaves the target model as it was, and the insert can be retried. (A
     // re-extracted segment's earlier contribution was removed above, in its own transaction;
@@ -491,6 +581,9 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
         "checks {}, worst e_TSDF {:.4f} m, least o_TSDF {})",
         session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m, merge.tsdf_overlap,
         best->scene_checks, best->scene_rmse_max, best->scene_overlap_min);
+    if (kept != nullptr) {
+      OBJDB_RETURN_IF_ERROR(absorbCoAccepted(std::move(kept), *best, loaded, live, &report));
+    }
   }
   report.timings.store_ms = msSince(t_store);
   report.timings.total_ms = msSince(start);

@@ -89,6 +89,11 @@ struct InsertReport {
   size_t candidates = 0;         // after the prefilter, readable
   size_t unreadable_candidates = 0;  // prefilter candidates whose stored data failed to load
   std::vector<CandidateResult> results;  // one per candidate, in candidate order
+  // DatabaseParams::merge_co_accepted: the other candidates that accepted the segment, each
+  // checked against model_id after the merge (its registration from that transform), in
+  // candidate order; `absorbed` lists those merged into model_id (now in state merged).
+  std::vector<CandidateResult> co_accepted;
+  std::vector<int64_t> absorbed;
   InsertTimings timings;
 };
 
@@ -129,6 +134,16 @@ class ObjectDatabase {
                               const LiveScenes& live);
   CandidateResult evaluate(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
                            const LiveScenes& live, InsertTimings* timings);
+  // The checks after registration (out->registration accepted): model to model on the grids,
+  // then the merged grid at every pose of both against its scene. Fills the rest of `out`.
+  void verifyRegistered(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
+                        const LiveScenes& live, InsertTimings* timings, CandidateResult* out);
+  // DatabaseParams::merge_co_accepted, after the segment merged into `merged` (best): the other
+  // accepted candidates (`loaded` in report->results' order) verified onto it and merged in.
+  Status absorbCoAccepted(std::shared_ptr<const model::ObjectModel> merged,
+                          const CandidateResult& best,
+                          const std::vector<std::shared_ptr<const model::ObjectModel>>& loaded,
+                          const LiveScenes& live, InsertReport* report);
   std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);
   // A model this database added, replaced (entry given) or removed (no entry): drops its cached
   // index and updates the prefilter's entries.

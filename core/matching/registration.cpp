@@ -213,8 +213,11 @@ CoarseAlignment estimateCoarseAlignment(const std::vector<Eigen::Vector3f>& from
   return result;
 }
 
-Registration registerModels(const model::ObjectModel& source, const model::ObjectModel& target,
-                            const DescriptorIndex& target_index, const MatchingParams& params) {
+namespace {
+// ICP from r->T_coarse; fills the fine transform, e_ICP and the verdict.
+void refineInto(const model::ObjectModel& source, const model::ObjectModel& target,
+                const MatchingParams& params, Registration* out) {
+  Registration& r = *out;
   // PCL reports too few ICP pairs as an error on stderr; here that outcome is a rejection with
   // its reason, so PCL's console stays quiet.
   static const bool quiet = [] {
@@ -222,6 +225,65 @@ Registration registerModels(const model::ObjectModel& source, const model::Objec
     return true;
   }();
   (void)quiet;
+  // Point-to-plane ICP from the initial (coarse) transform.
+  const auto t = Clock::now();
+  pcl::IterativeClosestPointWithNormals<pcl::PointNormal, pcl::PointNormal> icp;
+  // ICP moves the source: a thinned source (at most icp_max_source_points) against the full
+  // target keeps its cost bounded without losing the target's detail.
+  icp.setInputSource(withNormals(
+      source.cloud, std::max<size_t>(1, (source.cloud.points.size() +
+                                         size_t(params.icp_max_source_points) - 1) /
+                                            size_t(params.icp_max_source_points))));
+  icp.setInputTarget(withNormals(target.cloud));
+  icp.setMaxCorrespondenceDistance(params.icp_max_correspondence_m);
+  icp.setMaximumIterations(params.icp_iterations);
+  // Converged when an iteration moves the source by less than 0.1 mm (PCL compares the squared
+  // translation with the epsilon) and turns it by less than its default rotation threshold.
+  icp.setTransformationEpsilon(1e-8);
+  icp.setEuclideanFitnessEpsilon(1e-9);
+  pcl::PointCloud<pcl::PointNormal> aligned;
+  icp.align(aligned, r.T_coarse.matrix().cast<float>());
+  r.icp_ms = msSince(t);
+  if (!icp.hasConverged()) {
+    r.reason = "ICP did not converge";
+    return;
+  }
+  r.T_target_source = Transform(icp.getFinalTransformation().cast<double>());
+  // Orthonormalise the float round trip so the transform validates as a rigid motion.
+  const Eigen::Quaterniond q(r.T_target_source.rotation());
+  r.T_target_source.linear() = q.normalized().toRotationMatrix();
+  // e_ICP: point-to-plane RMSE over the source points whose nearest target point lies within
+  // the ICP correspondence distance (what point-to-plane ICP minimises). Point-to-point RMSE
+  // would charge a partial view for surface that simply continues beyond the other view.
+  {
+    pcl::search::KdTree<pcl::PointNormal> tree;
+    tree.setInputCloud(icp.getInputTarget());
+    const pcl::PointCloud<pcl::PointNormal>& target_cloud = *icp.getInputTarget();
+    std::vector<int> nearest(1);
+    std::vector<float> squared(1);
+    const double max2 = double(params.icp_max_correspondence_m) * params.icp_max_correspondence_m;
+    double sum = 0.0;
+    size_t pairs = 0;
+    for (const auto& p : aligned) {
+      if (tree.nearestKSearch(p, 1, nearest, squared) != 1 || double(squared[0]) > max2) continue;
+      const pcl::PointNormal& q = target_cloud[size_t(nearest[0])];
+      const double e = double((p.getVector3fMap() - q.getVector3fMap()).dot(q.getNormalVector3fMap()));
+      sum += e * e;
+      ++pairs;
+    }
+    r.icp_pairs = pairs;
+    r.icp_rmse = pairs ? std::sqrt(sum / double(pairs)) : INFINITY;
+  }
+  if (!(r.icp_rmse <= double(params.icp_max_rmse_m))) {
+    r.reason = absl::StrFormat("e_ICP %.4f m > e*_ICP %.4f m", r.icp_rmse, params.icp_max_rmse_m);
+    return;
+  }
+  r.accepted = true;
+}
+}  // namespace
+
+Registration registerModels(const model::ObjectModel& source, const model::ObjectModel& target,
+                            const DescriptorIndex& target_index, const MatchingParams& params) {
   Registration r;
   auto t = Clock::now();
   const std::vector<DescriptorMatch> matches =
@@ -259,60 +321,15 @@ Registration registerModels(const model::ObjectModel& source, const model::Objec
     return r;
   }
 
-  // Point-to-plane ICP from the coarse transform.
-  t = Clock::now();
-  pcl::IterativeClosestPointWithNormals<pcl::PointNormal, pcl::PointNormal> icp;
-  // ICP moves the source: a thinned source (at most icp_max_source_points) against the full
-  // target keeps its cost bounded without losing the target's detail.
-  icp.setInputSource(withNormals(
-      source.cloud, std::max<size_t>(1, (source.cloud.points.size() +
-                                         size_t(params.icp_max_source_points) - 1) /
-                                            size_t(params.icp_max_source_points))));
-  icp.setInputTarget(withNormals(target.cloud));
-  icp.setMaxCorrespondenceDistance(params.icp_max_correspondence_m);
-  icp.setMaximumIterations(params.icp_iterations);
-  // Converged when an iteration moves the source by less than 0.1 mm (PCL compares the squared
-  // translation with the epsilon) and turns it by less than its default rotation threshold.
-  icp.setTransformationEpsilon(1e-8);
-  icp.setEuclideanFitnessEpsilon(1e-9);
-  pcl::PointCloud<pcl::PointNormal> aligned;
-  icp.align(aligned, r.T_coarse.matrix().cast<float>());
-  r.icp_ms = msSince(t);
-  if (!icp.hasConverged()) {
-    r.reason = "ICP did not converge";
-    return r;
-  }
-  r.T_target_source = Transform(icp.getFinalTransformation().cast<double>());
-  // Orthonormalise the float round trip so the transform validates as a rigid motion.
-  const Eigen::Quaterniond q(r.T_target_source.rotation());
-  r.T_target_source.linear() = q.normalized().toRotationMatrix();
-  // e_ICP: point-to-plane RMSE over the source points whose nearest target point lies within
-  // the ICP correspondence distance (what point-to-plane ICP minimises). Point-to-point RMSE
-  // would charge a partial view for surface that simply continues beyond the other view.
-  {
-    pcl::search::KdTree<pcl::PointNormal> tree;
-    tree.setInputCloud(icp.getInputTarget());
-    const pcl::PointCloud<pcl::PointNormal>& target_cloud = *icp.getInputTarget();
-    std::vector<int> nearest(1);
-    std::vector<float> squared(1);
-    const double max2 = double(params.icp_max_correspondence_m) * params.icp_max_correspondence_m;
-    double sum = 0.0;
-    size_t pairs = 0;
-    for (const auto& p : aligned) {
-      if (tree.nearestKSearch(p, 1, nearest, squared) != 1 || double(squared[0]) > max2) continue;
-      const pcl::PointNormal& q = target_cloud[size_t(nearest[0])];
-      const double e = double((p.getVector3fMap() - q.getVector3fMap()).dot(q.getNormalVector3fMap()));
-      sum += e * e;
-      ++pairs;
-    }
-    r.icp_pairs = pairs;
-    r.icp_rmse = pairs ? std::sqrt(sum / double(pairs)) : INFINITY;
-  }
-  if (!(r.icp_rmse <= double(params.icp_max_rmse_m))) {
-    r.reason = absl::StrFormat("e_ICP %.4f m > e*_ICP %.4f m", r.icp_rmse, params.icp_max_rmse_m);
-    return r;
-  }
-  r.accepted = true;
+  refineInto(source, target, params, &r);
+  return r;
+}
+
+Registration refineRegistration(const model::ObjectModel& source, const model::ObjectModel& target,
+                                const Transform& T_initial, const MatchingParams& params) {
+  Registration r;
+  r.T_coarse = T_initial;
+  refineInto(source, target, params, &r);
   return r;
 }
 

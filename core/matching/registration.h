@@ -87,4 +87,10 @@ struct Registration {
 Registration registerModels(const model::ObjectModel& source, const model::ObjectModel& target,
                             const DescriptorIndex& target_index, const MatchingParams& params);
 
+// The fine step alone: point-to-plane ICP of `source` onto `target` from `T_initial` (kept as
+// T_coarse), accepted when it converges with e_ICP ≤ e*_ICP. registerModels ends with it; the
+// database uses it where a transform is already known (two models that each took one segment).
+Registration refineRegistration(const model::ObjectModel& source, const model::ObjectModel& target,
+                                const Transform& T_initial, const MatchingParams& params);
+
 }  // namespace objdb::matching

@@ -160,6 +160,54 @@ TEST(SqliteStore, ReplaceAndRemoveKeepIdsStableAndNeverReuseThem) {
   EXPECT_EQ(stats.removed_models, 1);
 }
 
+TEST(SqliteStore, AnAbsorbedModelIsKeptAsMergedIntoItsTargetInOneUnit) {
+  TempDir dir;
+  auto store = openStore(dir / "db.sqlite");
+  const int64_t a = store->addModel(makeStoreModel(1, 1)).value();
+  const int64_t b = store->addModel(makeStoreModel(2, 1)).value();
+  model::ObjectModel joined = makeStoreModel(3, 2);  // both models' observations
+  joined.id = a;
+  database::MergeRecord record;
+  record.target = a;
+  record.source = "model 2";
+  record.tsdf_rmse_m = 0.004;
+  record.tsdf_overlap = 3415;
+  record.scene_checks = 5;
+  ASSERT_TRUE(store->absorbModel(model::cloneModel(joined), record, b).ok());
+  auto check = [&] {
+    EXPECT_EQ(diffModels(*store->model(a).value(), joined), "");
+    EXPECT_EQ(store->model(b).status().code(), absl::StatusCode::kNotFound);
+    EXPECT_EQ(store->modelIds().value(), std::vector<int64_t>{a});
+    ModelQuery query;
+    query.include_merged = true;
+    const auto summaries = store->modelSummaries(query).value();
+    ASSERT_EQ(summaries.size(), 2u);
+    EXPECT_EQ(summaries[1].id, b);
+    EXPECT_EQ(summaries[1].state, "merged");
+    EXPECT_EQ(summaries[1].merged_into, a);
+    EXPECT_TRUE(summaries[1].observations.empty());
+    EXPECT_EQ(summaries[0].observations.size(), 2u);
+    const auto records = store->mergeRecordsInto(a).value();
+    ASSERT_EQ(records.size(), 1u);
+    EXPECT_EQ(records[0].source, "model 2");
+    EXPECT_EQ(records[0].tsdf_overlap, 3415u);
+    EXPECT_EQ(store->stats().value().merged_models, 1);
+  };
+  check();
+  // Again, or into itself: refused, and nothing changes.
+  model::ObjectModel again = makeStoreModel(4, 1);
+  again.id = a;
+  const Status twice = store->absorbModel(model::cloneModel(again), record, b);
+  EXPECT_EQ(twice.code(), absl::StatusCode::kNotFound) << twice;
+  EXPECT_THAT(twice.message(), HasSubstr("merging object model 2 into object model 1"));
+  EXPECT_EQ(store->absorbModel(std::move(again), record, a).code(),
+            absl::StatusCode::kInvalidArgument);
+  check();
+  store.reset();
+  store = openStore(dir / "db.sqlite");
+  check();
+}
+
 TEST(SqliteStore, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   TempDir dir;
   auto store = openStore(dir / "db.sqlite");

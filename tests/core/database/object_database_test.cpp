@@ -369,6 +369,76 @@ TEST(ObjectDatabase, StopsEvaluatingCandidatesOnceEnoughWereAccepted) {
   EXPECT_TRUE(two.merged);
 }
 
+// Two halves of one object that share too little to merge (monday's left half, tuesday's right
+// half), then a view of all of it on wednesday: both accept it, it merges into the better one,
+// and the other is verified onto the result through the transform the segment gives and joins.
+TEST(ObjectDatabase, TwoModelsThatBothTakeOneSegmentBecomeOne) {
+  const World wednesday{boxWithBall(), pose(0.9, 0.8, -1.0)};
+  auto run = [&](bool merge_co_accepted, Fixture* f) {
+    addScenes(&f->store);
+    EXPECT_TRUE(f->store.putScene("wednesday",
+                                  std::make_shared<tsdf::TsdfLayer>(sceneGrid({wednesday}))).ok());
+    auto left = f->db->insertSegment("monday", segment(7, kMonday, -0.3f, 0.04f));
+    auto right = f->db->insertSegment("tuesday", segment(3, kTuesday, -0.04f, 0.3f));
+    EXPECT_TRUE(left.ok() && right.ok());
+    EXPECT_FALSE(right->merged) << "the halves alone must stay apart for this test";
+    auto whole = f->db->insertSegment("wednesday", segment(5, wednesday, -0.3f, 0.3f));
+    EXPECT_TRUE(whole.ok()) << whole.status();
+    EXPECT_EQ(whole->results.size(), 2u);
+    for (const auto& r : whole->results) EXPECT_TRUE(r.accepted) << r.stage << ": " << r.reason;
+    (void)merge_co_accepted;
+    return *whole;
+  };
+  {
+    Fixture f;
+    const InsertReport whole = run(true, &f);
+    ASSERT_TRUE(whole.merged);
+    ASSERT_EQ(whole.co_accepted.size(), 1u);
+    ASSERT_TRUE(whole.co_accepted[0].accepted)
+        << whole.co_accepted[0].stage << ": " << whole.co_accepted[0].reason;
+    ASSERT_EQ(whole.absorbed.size(), 1u);
+    EXPECT_GT(whole.co_accepted[0].scene_checks, 0u);
+    ASSERT_EQ(f.store.modelIds().value(), std::vector<int64_t>{whole.model_id});
+    auto model = f.store.model(whole.model_id).value();
+    ASSERT_EQ(model->observations.size(), 3u);
+    // Every pose where the object was: in the model frame (the first model's), monday's world
+    // when the left half defined it, each session's true pose relative to monday's.
+    const Transform frame = model->observations[0].session == "monday"
+                                ? kMonday.T_world_object.inverse()
+                                : model->observations[0].session == "tuesday"
+                                      ? kTuesday.T_world_object.inverse()
+                                      : wednesday.T_world_object.inverse();
+    for (const auto& o : model->observations) {
+      const World& w = o.session == "monday" ? kMonday
+                       : o.session == "tuesday" ? kTuesday
+                                                : wednesday;
+      const Transform error = (w.T_world_object * frame).inverse() * o.T_world_object;
+      EXPECT_LT(error.translation().norm(), 0.02) << o.session;
+      EXPECT_LT(Eigen::AngleAxisd(error.rotation()).angle() * 180 / M_PI, 3.0) << o.session;
+    }
+    const auto merges = f.store.mergeRecords().value();
+    ASSERT_EQ(merges.size(), 2u);
+    EXPECT_EQ(merges[1].source, "model " + std::to_string(whole.absorbed[0]));
+    EXPECT_EQ(merges[1].target, whole.model_id);
+    // The joined model's segments are the survivor's now: withdrawing one rebuilds it.
+    const std::string absorbed_session =
+        whole.absorbed[0] == 1 ? "monday" : "tuesday";
+    const uint32_t absorbed_label = absorbed_session == "monday" ? 7 : 3;
+    EXPECT_EQ(f.db->withdrawSegment(absorbed_session, absorbed_label).value(), whole.model_id);
+    EXPECT_EQ(f.store.model(whole.model_id).value()->observations.size(), 2u);
+  }
+  {
+    Params p = params();
+    p.database.merge_co_accepted = false;
+    Fixture f(p);
+    const InsertReport whole = run(false, &f);
+    EXPECT_TRUE(whole.merged);
+    EXPECT_TRUE(whole.absorbed.empty());
+    EXPECT_TRUE(whole.co_accepted.empty());
+    EXPECT_EQ(f.store.modelIds().value().size(), 2u);
+  }
+}
+
 TEST(ObjectDatabase, BadInputIsAClearError) {
   Fixture f;
   const World a{boxWithBall(), pose(0, 0, 0)};

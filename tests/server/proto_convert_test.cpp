@@ -1,0 +1,62 @@
+#include "server/proto_convert.h"
+
+#include <gtest/gtest.h>
+
+namespace objdb::server {
+namespace {
+
+database::CandidateResult accepted(int64_t id, double rmse, size_t overlap) {
+  database::CandidateResult r;
+  r.model_id = id;
+  r.accepted = true;
+  r.registration.accepted = true;
+  r.registration.icp_rmse = rmse / 2;
+  r.model_verdict.accepted = true;
+  r.model_verdict.agreement.rmse = rmse;
+  r.model_verdict.agreement.overlap = overlap;
+  r.model_verdict.agreement.compared = overlap + 100;
+  r.scene_checks = 3;
+  return r;
+}
+
+TEST(ObjectEvents, ANewObjectIsCreated) {
+  database::InsertReport report;
+  report.model_id = 12;
+  const auto events = objectEvents(report, 40);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind(), v1::ObjectEvent::CREATED);
+  EXPECT_EQ(events[0].object_id(), 12u);
+  EXPECT_EQ(events[0].segment_id(), 40u);
+  EXPECT_FALSE(events[0].has_evidence());
+}
+
+// The segment merged into object 9 (the lowest e_TSDF); object 26 took it too and joined 9
+// afterwards, object 32 took it but failed the check against 9.
+TEST(ObjectEvents, ObjectsThatJoinTheSurvivorEachGetAMergedEventAfterTheSegments) {
+  database::InsertReport report;
+  report.model_id = 9;
+  report.merged = true;
+  report.results = {accepted(26, 0.0045, 3840), accepted(9, 0.0044, 6550),
+                    accepted(32, 0.0171, 5426)};
+  report.co_accepted = {accepted(26, 0.0037, 3415), accepted(32, 0.0300, 900)};
+  report.co_accepted[1].accepted = false;
+  report.co_accepted[1].stage = "model";
+  report.absorbed = {26};
+  const auto events = objectEvents(report, 77);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].kind(), v1::ObjectEvent::MERGED);
+  EXPECT_EQ(events[0].object_id(), 0u);  // the segment's own model
+  EXPECT_EQ(events[0].into_object_id(), 9u);
+  EXPECT_DOUBLE_EQ(events[0].evidence().tsdf_rmse_m(), 0.0044);
+  EXPECT_EQ(events[0].evidence().overlap_voxels(), 6550u);
+  EXPECT_EQ(events[0].evidence().non_overlap_voxels(), 100u);
+  EXPECT_EQ(events[1].kind(), v1::ObjectEvent::MERGED);
+  EXPECT_EQ(events[1].object_id(), 26u);
+  EXPECT_EQ(events[1].into_object_id(), 9u);
+  EXPECT_EQ(events[1].segment_id(), 77u);
+  EXPECT_DOUBLE_EQ(events[1].evidence().tsdf_rmse_m(), 0.0037);
+  EXPECT_EQ(events[1].evidence().scene_checks(), 3u);
+}
+
+}  // namespace
+}  // namespace objdb::server
