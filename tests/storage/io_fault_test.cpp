@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <functional>
 
+#include "absl/strings/str_format.h"
 #include "storage/sqlite_store.h"
 #include "tests/storage/store_fixtures.h"
 #include "tests/support/faulty_vfs.h"
@@ -59,9 +60,10 @@ void expectConsistent(const SqliteStore& store, const Present& present, size_t e
 using Write = std::function<StatusOr<int64_t>(SqliteStore* store, int64_t first_id)>;
 
 // Fails each write, sync and truncate of `write`, once and then persistently, and checks what the
-// store says and holds afterwards.
+// store says and holds afterwards. With `absorbed`, the store also holds it (as model first_id +
+// 1) before the write, and a write that succeeds has taken it out of the active models.
 void sweepFaults(FaultyVfs* vfs, const Write& write, const model::ObjectModel& written,
-                 size_t merges_when_done) {
+                 size_t merges_when_done, const model::ObjectModel* absorbed = nullptr) {
   const model::ObjectModel first = makeStoreModel(1, 2);
   const model::ObjectModel third = makeStoreModel(3, 1);
 
@@ -73,6 +75,7 @@ void sweepFaults(FaultyVfs* vfs, const Write& write, const model::ObjectModel& w
     ASSERT_NE(store, nullptr);
     const auto first_id = add(store.get(), first);
     ASSERT_TRUE(first_id.ok()) << first_id.status();
+    if (absorbed != nullptr) ASSERT_EQ(add(store.get(), *absorbed).value(), *first_id + 1);
     vfs->failAt(0, false);
     const auto done = write(store.get(), *first_id);
     ASSERT_TRUE(done.ok()) << done.status();
@@ -92,6 +95,7 @@ void sweepFaults(FaultyVfs* vfs, const Write& write, const model::ObjectModel& w
       ASSERT_NE(store, nullptr);
       const auto first_id = add(store.get(), first);
       ASSERT_TRUE(first_id.ok()) << first_id.status();
+      if (absorbed != nullptr) ASSERT_EQ(add(store.get(), *absorbed).value(), *first_id + 1);
 
       vfs->failAt(k, persistent);
       const StatusOr<int64_t> done = write(store.get(), *first_id);
@@ -111,6 +115,7 @@ void sweepFaults(FaultyVfs* vfs, const Write& write, const model::ObjectModel& w
         EXPECT_THAT(std::string(done.status().message()), HasSubstr("I/O error"));
         EXPECT_THAT(std::string(done.status().message()), HasSubstr("model"));
         present.push_back({*first_id, &first});
+        if (absorbed != nullptr) present.push_back({*first_id + 1, absorbed});
       }
       expectConsistent(*store, present, present.size());
       EXPECT_EQ(store->mergeRecords().value().size(), merges);
@@ -155,6 +160,26 @@ TEST(SqliteStoreIoFaults, EveryFailedWriteSyncOrTruncateOfAMergeLeavesTheOldMode
     return first_id;
   };
   sweepFaults(&vfs, merge, merged, 1);
+}
+
+// One model merged into another (DatabaseParams::merge_co_accepted): both as they were, or the
+// joined one alone with the other in state merged.
+TEST(SqliteStoreIoFaults, EveryFailedWriteSyncOrTruncateOfAJoinLeavesBothModelsOrTheJoinedOne) {
+  FaultyVfs vfs;
+  const model::ObjectModel joined = makeStoreModel(4, 3);
+  const model::ObjectModel other = makeStoreModel(5, 1);
+  const Write join = [&](SqliteStore* store, int64_t first_id) -> StatusOr<int64_t> {
+    model::ObjectModel m = model::cloneModel(joined);
+    m.id = first_id;
+    database::MergeRecord record;
+    record.target = first_id;
+    record.source = absl::StrFormat("model %d", first_id + 1);
+    record.tsdf_rmse_m = 0.004;
+    record.tsdf_overlap = 3400;
+    OBJDB_RETURN_IF_ERROR(store->absorbModel(std::move(m), record, first_id + 1));
+    return first_id;
+  };
+  sweepFaults(&vfs, join, joined, 1, &other);
 }
 
 TEST(SqliteStoreIoFaults, AFullDiskIsResourceExhaustedAndTheStoreGoesOnOnceThereIsSpace) {
