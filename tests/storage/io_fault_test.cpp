@@ -143,19 +143,27 @@ TEST(SqliteStoreIoFaults, EveryFailedWriteSyncOrTruncateOfAnInsertLeavesTheModel
   sweepFaults(&vfs, [&](SqliteStore* store, int64_t) { return add(store, second); }, second, 0);
 }
 
+// `written` as model first_id, with the record of what merged into it.
+std::pair<model::ObjectModel, database::MergeRecord> mergedInto(int64_t first_id,
+                                                               const model::ObjectModel& written,
+                                                               std::string source) {
+  model::ObjectModel m = model::cloneModel(written);
+  m.id = first_id;
+  database::MergeRecord record;
+  record.target = first_id;
+  record.source = std::move(source);
+  record.T_target_source = written.observations[1].T_object_segment;
+  record.icp_rmse_m = 0.01;
+  record.tsdf_rmse_m = 0.005;
+  record.tsdf_overlap = 3000;
+  return {std::move(m), record};
+}
+
 TEST(SqliteStoreIoFaults, EveryFailedWriteSyncOrTruncateOfAMergeLeavesTheOldModelOrTheMergedOne) {
   FaultyVfs vfs;
   const model::ObjectModel merged = makeStoreModel(4, 3);
   const Write merge = [&](SqliteStore* store, int64_t first_id) -> StatusOr<int64_t> {
-    model::ObjectModel m = model::cloneModel(merged);
-    m.id = first_id;
-    database::MergeRecord record;
-    record.target = first_id;
-    record.source = "segment s1/7";
-    record.T_target_source = merged.observations[1].T_object_segment;
-    record.icp_rmse_m = 0.01;
-    record.tsdf_rmse_m = 0.005;
-    record.tsdf_overlap = 3000;
+    auto [m, record] = mergedInto(first_id, merged, "segment s1/7");
     OBJDB_RETURN_IF_ERROR(store->replaceModel(std::move(m), record));
     return first_id;
   };
@@ -169,13 +177,7 @@ TEST(SqliteStoreIoFaults, EveryFailedWriteSyncOrTruncateOfAJoinLeavesBothModelsO
   const model::ObjectModel joined = makeStoreModel(4, 3);
   const model::ObjectModel other = makeStoreModel(5, 1);
   const Write join = [&](SqliteStore* store, int64_t first_id) -> StatusOr<int64_t> {
-    model::ObjectModel m = model::cloneModel(joined);
-    m.id = first_id;
-    database::MergeRecord record;
-    record.target = first_id;
-    record.source = absl::StrFormat("model %d", first_id + 1);
-    record.tsdf_rmse_m = 0.004;
-    record.tsdf_overlap = 3400;
+    auto [m, record] = mergedInto(first_id, joined, absl::StrFormat("model %d", first_id + 1));
     OBJDB_RETURN_IF_ERROR(store->absorbModel(std::move(m), record, first_id + 1));
     return first_id;
   };
