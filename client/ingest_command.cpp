@@ -151,7 +151,7 @@ int runIngestCommand(int argc, char** argv) {
         }
         ++inserted;
         merged += report->merged ? 1 : 0;
-        joined += report->absorbed.size();
+        joined += report->absorbed().size();
       }
       return absl::OkStatus();
     };

@@ -540,7 +540,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     // As the events say: a segment merged, or a model created for it.
     if (report->merged) {
       c.set_objects_merged(c.objects_merged() + 1);
-      c.set_objects_joined(c.objects_joined() + report->absorbed.size());
+      c.set_objects_joined(c.objects_joined() + report->absorbed().size());
     } else {
       c.set_objects_created(c.objects_created() + 1);
     }

@@ -613,26 +613,39 @@ Status SqliteStore::absorbModel(model::ObjectModel target, const database::Merge
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));
     // The absorbed row stays for lineage (state merged, merged_into the target); its geometry
     // and observations now live in the target.
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement s,
-        Statement::prepare(*writer_,
-                           absl::StrFormat("UPDATE models SET state = 'merged', merged_into = ?, "
-                                           "grid = NULL, surface_voxels = NULL, cloud = NULL, "
-                                           "keypoints = NULL, descriptors = NULL, updated_at = %s "
-                                           "WHERE id = ? AND state = 'active'",
-                                           kNow)));
-    OBJDB_RETURN_IF_ERROR(s.bind(1, target.id).bind(2, absorbed).run());
-    if (sqlite3_changes(writer_->get()) == 0) {
-      return absl::NotFoundError(absl::StrFormat("no object model %d to merge", absorbed));
-    }
-    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
-                                              *writer_, "DELETE FROM observations WHERE model_id = ?"));
-    OBJDB_RETURN_IF_ERROR(del.bind(1, absorbed).run());
+    OBJDB_RETURN_IF_ERROR(retireModel(absorbed, target.id));
     OBJDB_RETURN_IF_ERROR(rewriteModel(e, target.id, &merge));
     return txn.commit();
   };
   return annotate(body(), absl::StrFormat("merging object model %d into object model %d", absorbed,
                                           target.id));
+}
+
+// Active model `id` out of the active set: state removed, or merged into `merged_into` (> 0);
+// its blobs and observations dropped, its row kept. Runs inside the caller's write transaction.
+Status SqliteStore::retireModel(int64_t id, int64_t merged_into) {
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_,
+                         absl::StrFormat("UPDATE models SET state = ?, merged_into = ?, "
+                                         "grid = NULL, surface_voxels = NULL, cloud = NULL, "
+                                         "keypoints = NULL, descriptors = NULL, updated_at = %s "
+                                         "WHERE id = ? AND state = 'active'",
+                                         kNow)));
+  s.bind(1, std::string_view(merged_into > 0 ? "merged" : "removed"));
+  if (merged_into > 0) {
+    s.bind(2, merged_into);
+  } else {
+    s.bindNull(2);
+  }
+  OBJDB_RETURN_IF_ERROR(s.bind(3, id).run());
+  if (sqlite3_changes(writer_->get()) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to %s", id,
+                                               merged_into > 0 ? "merge" : "remove"));
+  }
+  OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                            *writer_, "DELETE FROM observations WHERE model_id = ?"));
+  return del.bind(1, id).run();
 }
 
 Status SqliteStore::removeModel(int64_t id) {
@@ -642,21 +655,7 @@ Status SqliteStore::removeModel(int64_t id) {
     OBJDB_ASSIGN_OR_RETURN(Transaction txn,
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));
     // The row stays as a tombstone (ids are never reused; merge records keep their target).
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement s,
-        Statement::prepare(*writer_,
-                           absl::StrFormat("UPDATE models SET state = 'removed', grid = NULL, "
-                                           "surface_voxels = NULL, cloud = NULL, keypoints = NULL, "
-                                           "descriptors = NULL, updated_at = %s "
-                                           "WHERE id = ? AND state = 'active'",
-                                           kNow)));
-    OBJDB_RETURN_IF_ERROR(s.bind(1, id).run());
-    if (sqlite3_changes(writer_->get()) == 0) {
-      return absl::NotFoundError(absl::StrFormat("no object model %d to remove", id));
-    }
-    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
-                                              *writer_, "DELETE FROM observations WHERE model_id = ?"));
-    OBJDB_RETURN_IF_ERROR(del.bind(1, id).run());
+    OBJDB_RETURN_IF_ERROR(retireModel(id, 0));
     return txn.commit();
   };
   return body();

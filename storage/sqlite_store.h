@@ -238,6 +238,7 @@ class SqliteStore : public database::ModelStore {
   StatusOr<int64_t> sessionIdForWrite(const std::string& name);
   Status writeObservations(int64_t model_id, const EncodedModel& model, bool replace);
   Status rewriteModel(const EncodedModel& e, int64_t id, const database::MergeRecord* merge);
+  Status retireModel(int64_t id, int64_t merged_into);
   // A map (TSDF blocks, optional main labels) into `tables`, replacing the session's earlier one;
   // `frames` is kept where the tables have the column (saved maps).
   Status writeMap(const MapTables& tables, const std::string& session,

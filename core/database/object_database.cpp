@@ -404,8 +404,6 @@ Status ObjectDatabase::absorbCoAccepted(
         "o_TSDF {}; scene checks {}, worst e_TSDF {:.4f} m)",
         other.id, merged->id, check.registration.icp_rmse, check.model_verdict.agreement.rmse,
         check.model_verdict.agreement.overlap, check.scene_checks, check.scene_rmse_max);
-    check.accepted = true;
-    report->absorbed.push_back(other.id);
     report->co_accepted.push_back(std::move(check));
     merged = std::move(next);
   }

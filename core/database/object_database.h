@@ -91,9 +91,16 @@ struct InsertReport {
   std::vector<CandidateResult> results;  // one per candidate, in candidate order
   // DatabaseParams::merge_co_accepted: the other candidates that accepted the segment, each
   // checked against model_id after the merge (its registration from that transform), in
-  // candidate order; `absorbed` lists those merged into model_id (now in state merged).
+  // candidate order; the accepted ones were merged into model_id (now in state merged).
   std::vector<CandidateResult> co_accepted;
-  std::vector<int64_t> absorbed;
+  // The ids of those merged into model_id (the accepted entries of co_accepted).
+  std::vector<int64_t> absorbed() const {
+    std::vector<int64_t> ids;
+    for (const auto& r : co_accepted) {
+      if (r.accepted) ids.push_back(r.model_id);
+    }
+    return ids;
+  }
   InsertTimings timings;
 };
 

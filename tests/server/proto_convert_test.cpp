@@ -41,7 +41,6 @@ TEST(ObjectEvents, ObjectsThatJoinTheSurvivorEachGetAMergedEventAfterTheSegments
   report.co_accepted = {accepted(26, 0.0037, 3415), accepted(32, 0.0300, 900)};
   report.co_accepted[1].accepted = false;
   report.co_accepted[1].stage = "model";
-  report.absorbed = {26};
   const auto events = objectEvents(report, 77);
   ASSERT_EQ(events.size(), 2u);
   EXPECT_EQ(events[0].kind(), v1::ObjectEvent::MERGED);

@@ -396,7 +396,7 @@ TEST(ObjectDatabase, TwoModelsThatBothTakeOneSegmentBecomeOne) {
     ASSERT_EQ(whole.co_accepted.size(), 1u);
     ASSERT_TRUE(whole.co_accepted[0].accepted)
         << whole.co_accepted[0].stage << ": " << whole.co_accepted[0].reason;
-    ASSERT_EQ(whole.absorbed.size(), 1u);
+    ASSERT_EQ(whole.absorbed().size(), 1u);
     EXPECT_GT(whole.co_accepted[0].scene_checks, 0u);
     ASSERT_EQ(f.store.modelIds().value(), std::vector<int64_t>{whole.model_id});
     auto model = f.store.model(whole.model_id).value();
@@ -418,11 +418,11 @@ TEST(ObjectDatabase, TwoModelsThatBothTakeOneSegmentBecomeOne) {
     }
     const auto merges = f.store.mergeRecords().value();
     ASSERT_EQ(merges.size(), 2u);
-    EXPECT_EQ(merges[1].source, "model " + std::to_string(whole.absorbed[0]));
+    EXPECT_EQ(merges[1].source, "model " + std::to_string(whole.absorbed()[0]));
     EXPECT_EQ(merges[1].target, whole.model_id);
     // The joined model's segments are the survivor's now: withdrawing one rebuilds it.
     const std::string absorbed_session =
-        whole.absorbed[0] == 1 ? "monday" : "tuesday";
+        whole.absorbed()[0] == 1 ? "monday" : "tuesday";
     const uint32_t absorbed_label = absorbed_session == "monday" ? 7 : 3;
     EXPECT_EQ(f.db->withdrawSegment(absorbed_session, absorbed_label).value(), whole.model_id);
     EXPECT_EQ(f.store.model(whole.model_id).value()->observations.size(), 2u);
@@ -433,7 +433,7 @@ TEST(ObjectDatabase, TwoModelsThatBothTakeOneSegmentBecomeOne) {
     Fixture f(p);
     const InsertReport whole = run(false, &f);
     EXPECT_TRUE(whole.merged);
-    EXPECT_TRUE(whole.absorbed.empty());
+    EXPECT_TRUE(whole.absorbed().empty());
     EXPECT_TRUE(whole.co_accepted.empty());
     EXPECT_EQ(f.store.modelIds().value().size(), 2u);
   }
