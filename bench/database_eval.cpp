@@ -41,7 +41,7 @@
 #include "core/segmentation/depth_segmenter.h"
 #include "core/sim/generator.h"
 #include "core/sim/lounge.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 
 namespace {
 

@@ -20,7 +20,7 @@
 #include "core/model/features.h"
 #include "core/model/object_model.h"
 #include "storage/blob_codec.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 
 namespace objdb {
 namespace {

@@ -18,7 +18,7 @@
 #include "core/completion/scene_completion.h"
 #include "core/io/mesh_io.h"
 #include "core/tsdf/mesh_extraction.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 
 namespace objdb {
 namespace {

@@ -45,7 +45,7 @@ size_t depthAgreeingPoints(const std::vector<Eigen::Vector3f>& points,
   return n;
 }
 
-StatusOr<std::vector<Row>> loadRows(const storage::SqliteStore& store, size_t min_placements,
+StatusOr<std::vector<Row>> loadRows(const storage::Store& store, size_t min_placements,
                                     size_t max_rows) {
   std::vector<Row> rows;
   storage::ModelQuery query;

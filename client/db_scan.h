@@ -19,7 +19,7 @@
 #include "core/common/transform.h"
 #include "core/database/object_database.h"
 #include "core/io/dataset.h"
-#include "storage/sqlite_store.h"
+#include "storage/store.h"
 
 namespace objdb::cli {
 
@@ -57,7 +57,7 @@ size_t depthAgreeingPoints(const std::vector<Eigen::Vector3f>& points,
 
 // The active models with at least `min_placements` placements, most placements first, at most
 // `max_rows`, with their sampled clouds and merge records.
-StatusOr<std::vector<Row>> loadRows(const storage::SqliteStore& store, size_t min_placements,
+StatusOr<std::vector<Row>> loadRows(const storage::Store& store, size_t min_placements,
                                     size_t max_rows);
 
 // One pass over each session's frames (every `every`-th): the best frame of every placement and

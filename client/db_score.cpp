@@ -284,7 +284,7 @@ absl::flat_hash_set<uint64_t> dominantPlaneVoxels(const tsdf::TsdfLayer& scene, 
 
 }  // namespace
 
-StatusOr<StructureScore> scoreStructure(const storage::SqliteStore& store,
+StatusOr<StructureScore> scoreStructure(const storage::Store& store,
                                         const std::vector<Row>& rows) {
   StructureScore s;
   std::set<std::string> sessions;

@@ -12,7 +12,7 @@
 #include "client/db_scan.h"
 #include "core/common/status.h"
 #include "core/io/ground_truth.h"
-#include "storage/sqlite_store.h"
+#include "storage/store.h"
 
 namespace objdb::cli {
 
@@ -74,7 +74,7 @@ struct StructureScore {
 // at one height are one plane but separate faces). A placement lies on them when at least half
 // of its model points fall within one voxel of their surface voxels.
 // Sessions without a stored scene are skipped (counted in sessions_with_scene).
-StatusOr<StructureScore> scoreStructure(const storage::SqliteStore& store,
+StatusOr<StructureScore> scoreStructure(const storage::Store& store,
                                         const std::vector<Row>& rows);
 void printStructureScore(const StructureScore& score);
 

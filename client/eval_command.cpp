@@ -26,6 +26,7 @@
 #include "core/common/logging.h"
 #include "core/io/dataset.h"
 #include "server/server.h"
+#include "storage/sqlite/sqlite_store.h"
 
 namespace objdb {
 namespace {

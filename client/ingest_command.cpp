@@ -15,7 +15,7 @@
 #include "core/database/object_database.h"
 #include "core/io/dataset.h"
 #include "storage/model_settings.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 
 namespace objdb {
 namespace {

@@ -29,7 +29,7 @@
 #include "client/db_score.h"
 #include "client/commands.h"
 #include "core/io/dataset.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 
 namespace objdb {
 namespace {

@@ -31,7 +31,7 @@ constexpr std::chrono::milliseconds kIdleSaveDelay{5000};
 }  // namespace
 
 StatusOr<std::unique_ptr<ObjectDatabaseService>> ObjectDatabaseService::create(
-    const ServiceOptions& options, storage::SqliteStore* store) {
+    const ServiceOptions& options, storage::Store* store) {
   OBJDB_RETURN_IF_ERROR(options.params.validate());
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<database::ObjectDatabase> db,
                          database::ObjectDatabase::create(options.params, store));
@@ -52,7 +52,7 @@ StatusOr<std::unique_ptr<ObjectDatabaseService>> ObjectDatabaseService::create(
 }
 
 ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
-                                             storage::SqliteStore* store,
+                                             storage::Store* store,
                                              std::unique_ptr<database::ObjectDatabase> db)
     : options_(options),
       store_(store),

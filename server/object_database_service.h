@@ -15,7 +15,7 @@
 //   sends the SegmentExtracted and ObjectEvent messages back on the stream.
 // - EndSession flushes the map (every live label), inserts the rest, stores the scene map and
 //   ends the session, on the database thread.
-// - The queries read the SQLite file through its reader connections.
+// - The queries read the store (storage/store.h).
 // - A session's map lives in memory from its header to EndSession: a server stopped before
 //   EndSession loses the map of that session (its segments inserted so far stay), and the
 //   session is stored as interrupted.
@@ -36,7 +36,7 @@
 #include "core/common/status.h"
 #include "core/database/object_database.h"
 #include "objdb/v1/objdb.grpc.pb.h"
-#include "storage/sqlite_store.h"
+#include "storage/store.h"
 
 namespace objdb::database {
 class ObjectDatabase;
@@ -81,7 +81,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // Loads the database's prefilter entries (the store outlives the service). Errors: the
   // parameters, or a store that cannot be read.
   static StatusOr<std::unique_ptr<ObjectDatabaseService>> create(const ServiceOptions& options,
-                                                                 storage::SqliteStore* store);
+                                                                 storage::Store* store);
   ~ObjectDatabaseService() override;  // stop()
 
   // The sessions a stopped server left not ended (found by create()): open ones are marked
@@ -117,7 +117,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
 
  private:
   friend class SceneMeshReactor;
-  ObjectDatabaseService(const ServiceOptions& options, storage::SqliteStore* store,
+  ObjectDatabaseService(const ServiceOptions& options, storage::Store* store,
                         std::unique_ptr<database::ObjectDatabase> db);
 
   // Ingest.
@@ -176,7 +176,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::shared_ptr<LiveSession> liveSession(const std::string& name);
 
   const ServiceOptions options_;
-  storage::SqliteStore* store_;
+  storage::Store* store_;
   std::unique_ptr<database::ObjectDatabase> db_;  // used on the database thread only
   const std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
 

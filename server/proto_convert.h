@@ -15,7 +15,7 @@
 #include "core/common/transform.h"
 #include "core/database/object_database.h"
 #include "objdb/v1/objdb.pb.h"
-#include "storage/sqlite_store.h"
+#include "storage/store.h"
 
 namespace objdb::server {
 

@@ -1,6 +1,6 @@
 // The read-only calls of the ObjectDatabase service: ListSessions, ListObjects, GetObject,
-// GetSceneMesh (meshed on a worker thread, streamed in chunks) and GetStats. They read the SQLite
-// file through its reader connections; a live session adds its in-memory state and counters.
+// GetSceneMesh (meshed on a worker thread, streamed in chunks) and GetStats. They read the store
+// (storage/store.h); a live session adds its in-memory state and counters.
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -20,7 +20,7 @@ namespace {
 // The parts of `summary` at each of its poses, from the raw segments' voxels (in pose order, then
 // by label); with `voxels`, each part's voxel centres too. A pose whose segment row is gone, or
 // that was stored before parts had geometry, gives none.
-Status addParts(const storage::SqliteStore& store, const storage::ModelSummary& summary,
+Status addParts(const storage::Store& store, const storage::ModelSummary& summary,
                 bool voxels, google::protobuf::RepeatedPtrField<v1::ObjectPart>* out) {
   for (const auto& o : summary.observations) {
     if (o.raw_segment_id <= 0) continue;
@@ -396,7 +396,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
     for (const auto& t : stats.tables) {
       if (t.table == "raw_segments") response->set_segments_total(uint64_t(t.rows));
     }
-    response->set_database_size_bytes(uint64_t(fileBytes(store_->path())));
+    response->set_database_size_bytes(uint64_t(store_->diskBytes()));
     response->set_queued_segments(uint32_t(database_queue_->pending()));
     response->set_jobs_cancelled(jobs_cancelled_.load());
     response->set_candidates_skipped(candidates_skipped_.load());

@@ -9,6 +9,7 @@
 #include "core/common/logging.h"
 #include "server/auth.h"
 #include "server/object_database_service.h"
+#include "storage/open_store.h"
 
 namespace objdb {
 
@@ -80,8 +81,8 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   OBJDB_RETURN_IF_ERROR(options.validate());
   OBJDB_ASSIGN_OR_RETURN(const ListenAddress address, parseListenAddress(options.listen_address));
   // The database first: a file that cannot be served stops the start before anything listens.
-  OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<storage::SqliteStore> store,
-                         storage::SqliteStore::open(options.db_path));
+  OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<storage::Store> store,
+                         storage::openStore(options.db_path, storage::SqliteStoreOptions{}));
 
   server::ServiceOptions service_options;
   if (!options.token_file.empty()) {
@@ -143,7 +144,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   return result;
 }
 
-ObjdbServer::ObjdbServer(ServerOptions options, std::unique_ptr<storage::SqliteStore> store,
+ObjdbServer::ObjdbServer(ServerOptions options, std::unique_ptr<storage::Store> store,
                          std::unique_ptr<server::ObjectDatabaseService> service,
                          std::unique_ptr<grpc::Server> server, std::string host, int port)
     : options_(std::move(options)),
@@ -172,7 +173,7 @@ void ObjdbServer::shutdown() {
   service_->stop();
   // Copy the WAL back into the database file, so a clean stop leaves one self-contained file.
   if (const Status checkpointed = store_->checkpoint(); !checkpointed.ok()) {
-    log->warn("checkpoint of {} at shutdown failed: {}", options_.db_path,
+    log->warn("checkpoint of {} at shutdown failed: {}", store_->describe(),
               std::string(checkpointed.message()));
   }
   stopped_ = true;

@@ -12,7 +12,7 @@
 #include "core/common/params.h"
 #include "core/common/status.h"
 #include "server/address.h"
-#include "storage/sqlite_store.h"
+#include "storage/store.h"
 
 namespace grpc {
 class Server;
@@ -112,15 +112,15 @@ class ObjdbServer {
   bool stopped() const;
 
   // The database the server opened; its writes go through the server's single writer.
-  storage::SqliteStore& store() { return *store_; }
+  storage::Store& store() { return *store_; }
 
  private:
-  ObjdbServer(ServerOptions options, std::unique_ptr<storage::SqliteStore> store,
+  ObjdbServer(ServerOptions options, std::unique_ptr<storage::Store> store,
               std::unique_ptr<server::ObjectDatabaseService> service,
               std::unique_ptr<grpc::Server> server, std::string host, int port);
 
   const ServerOptions options_;
-  std::unique_ptr<storage::SqliteStore> store_;  // outlives the services that use it
+  std::unique_ptr<storage::Store> store_;  // outlives the services that use it
   // Declared before server_: services must outlive the grpc::Server that calls them.
   std::unique_ptr<server::ObjectDatabaseService> service_;
   std::unique_ptr<grpc::Server> server_;

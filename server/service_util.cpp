@@ -1,7 +1,6 @@
 #include "server/service_util.h"
 
 #include <chrono>
-#include <filesystem>
 #include <vector>
 
 #include "absl/strings/numbers.h"
@@ -56,16 +55,6 @@ StatusOr<int64_t> parsePageToken(const std::string& token, char kind, uint64_t f
 
 uint32_t pageSize(uint32_t requested) {
   return requested == 0 ? kDefaultPageSize : std::min(requested, kMaxPageSize);
-}
-
-int64_t fileBytes(const std::string& path) {
-  int64_t total = 0;
-  for (const char* suffix : {"", "-wal", "-shm"}) {
-    std::error_code ec;
-    const auto size = std::filesystem::file_size(path + suffix, ec);
-    if (!ec) total += int64_t(size);
-  }
-  return total;
 }
 
 }  // namespace objdb::server

@@ -36,7 +36,4 @@ std::string pageToken(char kind, int64_t last_id, uint64_t filter);
 StatusOr<int64_t> parsePageToken(const std::string& token, char kind, uint64_t filter);
 uint32_t pageSize(uint32_t requested);
 
-// Bytes of a SQLite database on disk: the file, its -wal and its -shm.
-int64_t fileBytes(const std::string& path);
-
 }  // namespace objdb::server

@@ -10,7 +10,7 @@
 
 #include "core/common/params.h"
 #include "core/common/status.h"
-#include "storage/sqlite_store.h"
+#include "storage/store.h"
 
 namespace objdb::storage {
 

@@ -11,7 +11,7 @@
 #include "core/database/object_database.h"
 #include "core/io/mesh_io.h"
 #include "core/tsdf/mesh_extraction.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/storage/store_fixtures.h"
 #include "tests/support/object_scenes.h"
 #include "tests/support/subprocess.h"

@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"
 

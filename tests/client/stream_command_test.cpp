@@ -13,7 +13,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/server.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"
 #include "tests/support/test_pki.h"

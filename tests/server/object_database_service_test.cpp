@@ -32,6 +32,7 @@
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "server/proto_convert.h"
 #include "server/server.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/server/ingest_fixtures.h"
 #include "tests/storage/store_fixtures.h"
 #include "tests/support/faulty_vfs.h"

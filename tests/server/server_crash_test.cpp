@@ -21,7 +21,7 @@
 #include <utility>
 #include <vector>
 
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/server/ingest_fixtures.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"

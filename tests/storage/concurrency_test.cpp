@@ -11,7 +11,7 @@
 
 #include <gtest/gtest.h>
 
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/storage/store_fixtures.h"
 #include "tests/support/temp_dir.h"
 

@@ -10,7 +10,7 @@
 #include <functional>
 
 #include "absl/strings/str_format.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/storage/store_fixtures.h"
 #include "tests/support/faulty_vfs.h"
 #include "tests/support/temp_dir.h"

@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "core/database/object_database.h"
-#include "storage/sqlite_store.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "tests/support/faulty_vfs.h"
 #include "tests/support/object_scenes.h"
 #include "tests/support/temp_dir.h"

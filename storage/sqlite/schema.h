@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "core/common/status.h"
-#include "storage/sqlite_util.h"
+#include "storage/sqlite/sqlite_util.h"
 
 namespace objdb::storage {
 

@@ -1,4 +1,4 @@
-#include "storage/schema.h"
+#include "storage/sqlite/schema.h"
 
 #include "absl/strings/str_format.h"
 #include "core/common/logging.h"

@@ -1,0 +1,448 @@
+// SqliteStore's object models: a model's row (its columns and blobs) and its observations,
+// written in the caller's transaction; reads of one model, of the matcher's prefilter entries and
+// of the listings' summaries, each from one snapshot.
+#include <algorithm>
+#include <map>
+#include <optional>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "storage/sqlite/sqlite_store.h"
+#include "storage/sqlite/sqlite_store_internal.h"
+
+namespace objdb::storage {
+
+using internal::inRow;
+using internal::kNow;
+using internal::parseParts;
+
+// A model's columns, encoded outside the write lock.
+struct EncodedModel {
+  bool planar = false;
+  bool structure = false;
+  double plane_inlier_ratio = 0;
+  int64_t num_points = 0, num_keypoints = 0;
+  double voxel_size = 0;
+  Eigen::Vector3f bbox_min = Eigen::Vector3f::Zero(), bbox_max = Eigen::Vector3f::Zero();
+  std::string grid, surface_voxels, cloud, keypoints, descriptors;
+  model::BuildTimings timings;
+  struct Obs {
+    std::string session;
+    int64_t label;
+    std::string T_world_object, T_object_segment;
+  };
+  std::vector<Obs> observations;
+};
+
+namespace {
+
+EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
+  EncodedModel e;
+  e.planar = m.planar;
+  e.structure = m.structure;
+  e.plane_inlier_ratio = m.plane_inlier_ratio;
+  e.num_points = int64_t(m.cloud.points.size());
+  e.num_keypoints = int64_t(m.keypoint_indices.size());
+  e.voxel_size = m.grid.voxelSize();
+  if (!m.cloud.points.empty()) {
+    e.bbox_min = e.bbox_max = m.cloud.points.front();
+    for (const auto& p : m.cloud.points) {
+      e.bbox_min = e.bbox_min.cwiseMin(p);
+      e.bbox_max = e.bbox_max.cwiseMax(p);
+    }
+  }
+  e.grid = encodeTsdfGrid(m.grid, options);
+  e.surface_voxels = encodeVoxelList(m.surface_voxels, options);
+  e.cloud = encodePointCloud(m.cloud, options);
+  e.keypoints = encodeIndices(m.keypoint_indices, options);
+  e.descriptors = encodeDescriptors(m.descriptors, options);
+  e.timings = m.timings;
+  for (const auto& o : m.observations) {
+    e.observations.push_back({o.session, int64_t(o.label), encodeTransform(o.T_world_object),
+                              encodeTransform(o.T_object_segment)});
+  }
+  return e;
+}
+
+// Binds the model columns in the order of kModelColumns to parameters 1..N.
+constexpr const char* kModelColumns =
+    "planar, plane_inlier_ratio, num_points, num_keypoints, voxel_size, bbox_min_x, bbox_min_y, "
+    "bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, grid, surface_voxels, cloud, keypoints, "
+    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms, structure";
+constexpr int kNumModelColumns = 21;
+
+void bindModel(Statement* s, const EncodedModel& e) {
+  s->bind(1, int64_t(e.planar)).bind(2, e.plane_inlier_ratio).bind(3, e.num_points);
+  s->bind(4, e.num_keypoints).bind(5, e.voxel_size);
+  for (int k = 0; k < 3; ++k) s->bind(6 + k, double(e.bbox_min[k]));
+  for (int k = 0; k < 3; ++k) s->bind(9 + k, double(e.bbox_max[k]));
+  s->bindBlob(12, e.grid).bindBlob(13, e.surface_voxels).bindBlob(14, e.cloud);
+  s->bindBlob(15, e.keypoints).bindBlob(16, e.descriptors);
+  s->bind(17, e.timings.cloud_ms).bind(18, e.timings.planarity_ms);
+  s->bind(19, e.timings.keypoints_ms).bind(20, e.timings.descriptors_ms);
+  s->bind(21, int64_t(e.structure));
+}
+
+}  // namespace
+
+StatusOr<int64_t> SqliteStore::addModel(model::ObjectModel model) {
+  const EncodedModel e = encodeModel(model, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> StatusOr<int64_t> {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    std::string placeholders;
+    for (int i = 0; i < kNumModelColumns; ++i) placeholders += "?, ";
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(*writer_,
+                           absl::StrFormat("INSERT INTO models(%s, state, created_at, updated_at) "
+                                           "VALUES (%s'active', %s, %s)",
+                                           kModelColumns, placeholders, kNow, kNow)));
+    bindModel(&s, e);
+    OBJDB_RETURN_IF_ERROR(s.run());
+    const int64_t id = sqlite3_last_insert_rowid(writer_->get());
+    OBJDB_RETURN_IF_ERROR(writeObservations(id, e, /*replace=*/false));
+    OBJDB_RETURN_IF_ERROR(txn.commit());
+    return id;
+  };
+  auto id = body();
+  if (!id.ok()) return annotate(id.status(), "adding an object model");
+  return id;
+}
+
+// The observation rows of model `model_id` (replacing its earlier ones when `replace`). Runs
+// inside the caller's transaction.
+Status SqliteStore::writeObservations(int64_t model_id, const EncodedModel& model, bool replace) {
+  if (replace) {
+    OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                              *writer_, "DELETE FROM observations WHERE model_id = ?"));
+    OBJDB_RETURN_IF_ERROR(del.bind(1, model_id).run());
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_,
+                         "INSERT INTO observations(model_id, seq, session_id, label, "
+                         "raw_segment_id, T_world_object, T_object_segment) VALUES "
+                         "(?, ?, ?, ?, (SELECT id FROM raw_segments WHERE session_id = ?3 AND "
+                         "label = ?4), ?, ?)"));
+  for (size_t k = 0; k < model.observations.size(); ++k) {
+    const auto& o = model.observations[k];
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(o.session));
+    OBJDB_RETURN_IF_ERROR(s.reset());
+    s.bind(1, model_id).bind(2, int64_t(k)).bind(3, sid).bind(4, o.label);
+    s.bindBlob(5, o.T_world_object).bindBlob(6, o.T_object_segment);
+    OBJDB_RETURN_IF_ERROR(s.run());
+  }
+  return absl::OkStatus();
+}
+
+// Model `id`'s row and observations rewritten from `e`, with `merge` recorded when given. Runs
+// inside the caller's write transaction.
+Status SqliteStore::rewriteModel(const EncodedModel& e, int64_t id,
+                                 const database::MergeRecord* merge) {
+  std::string assignments;
+  for (const absl::string_view column : absl::StrSplit(kModelColumns, ", ")) {
+    absl::StrAppend(&assignments, column, " = ?, ");
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_, absl::StrFormat("UPDATE models SET %supdated_at = %s "
+                                                   "WHERE id = ? AND state = 'active'",
+                                                   assignments, kNow)));
+  bindModel(&s, e);
+  s.bind(kNumModelColumns + 1, id);
+  OBJDB_RETURN_IF_ERROR(s.run());
+  if (sqlite3_changes(writer_->get()) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to replace", id));
+  }
+  OBJDB_RETURN_IF_ERROR(writeObservations(id, e, /*replace=*/true));
+  if (merge == nullptr) return absl::OkStatus();
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement m,
+      Statement::prepare(*writer_,
+                         absl::StrFormat("INSERT INTO merge_records(target, source, transform, "
+                                         "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
+                                         "scene_checks, created_at) VALUES "
+                                         "(?, ?, ?, ?, ?, ?, ?, %s)",
+                                         kNow)));
+  m.bind(1, merge->target).bind(2, merge->source).bindBlob(3, encodeTransform(merge->T_target_source));
+  m.bind(4, merge->icp_rmse_m).bind(5, merge->tsdf_rmse_m);
+  m.bind(6, int64_t(merge->tsdf_overlap)).bind(7, int64_t(merge->scene_checks));
+  return m.run();
+}
+
+Status SqliteStore::replaceModel(model::ObjectModel model,
+                                 const std::optional<database::MergeRecord>& merge) {
+  const EncodedModel e = encodeModel(model, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_RETURN_IF_ERROR(rewriteModel(e, model.id, merge ? &*merge : nullptr));
+    return txn.commit();
+  };
+  return annotate(body(), absl::StrFormat("replacing object model %d", model.id));
+}
+
+Status SqliteStore::absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
+                                int64_t absorbed) {
+  const EncodedModel e = encodeModel(target, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    if (absorbed == target.id) {
+      return absl::InvalidArgumentError("a model cannot be merged into itself");
+    }
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    // The absorbed row stays for lineage (state merged, merged_into the target); its geometry
+    // and observations now live in the target.
+    OBJDB_RETURN_IF_ERROR(retireModel(absorbed, target.id));
+    OBJDB_RETURN_IF_ERROR(rewriteModel(e, target.id, &merge));
+    return txn.commit();
+  };
+  return annotate(body(), absl::StrFormat("merging object model %d into object model %d", absorbed,
+                                          target.id));
+}
+
+// Active model `id` out of the active set: state removed, or merged into `merged_into` (> 0);
+// its blobs and observations dropped, its row kept. Runs inside the caller's write transaction.
+Status SqliteStore::retireModel(int64_t id, int64_t merged_into) {
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*writer_,
+                         absl::StrFormat("UPDATE models SET state = ?, merged_into = ?, "
+                                         "grid = NULL, surface_voxels = NULL, cloud = NULL, "
+                                         "keypoints = NULL, descriptors = NULL, updated_at = %s "
+                                         "WHERE id = ? AND state = 'active'",
+                                         kNow)));
+  s.bind(1, std::string_view(merged_into > 0 ? "merged" : "removed"));
+  if (merged_into > 0) {
+    s.bind(2, merged_into);
+  } else {
+    s.bindNull(2);
+  }
+  OBJDB_RETURN_IF_ERROR(s.bind(3, id).run());
+  if (sqlite3_changes(writer_->get()) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to %s", id,
+                                               merged_into > 0 ? "merge" : "remove"));
+  }
+  OBJDB_ASSIGN_OR_RETURN(Statement del, Statement::prepare(
+                                            *writer_, "DELETE FROM observations WHERE model_id = ?"));
+  return del.bind(1, id).run();
+}
+
+Status SqliteStore::removeModel(int64_t id) {
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    // The row stays as a tombstone (ids are never reused; merge records keep their target).
+    OBJDB_RETURN_IF_ERROR(retireModel(id, 0));
+    return txn.commit();
+  };
+  return body();
+}
+
+StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t id) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, absl::StrFormat("SELECT %s FROM models WHERE id = ? AND "
+                                                 "state = 'active'",
+                                                 kModelColumns)));
+  s.bind(1, id);
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  if (!row) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
+  const std::string where = absl::StrFormat("object model %d", id);
+  auto grid = decodeTsdfGrid(s.columnBlob(11));
+  if (!grid.ok()) return inRow(grid.status(), "models", id, "grid");
+  model::ObjectModel m(std::move(*grid));
+  m.id = id;
+  m.planar = s.columnInt(0) != 0;
+  m.plane_inlier_ratio = float(s.columnDouble(1));
+  auto voxels = decodeVoxelList(s.columnBlob(12));
+  if (!voxels.ok()) return inRow(voxels.status(), "models", id, "surface_voxels");
+  m.surface_voxels = std::move(*voxels);
+  auto cloud = decodePointCloud(s.columnBlob(13));
+  if (!cloud.ok()) return inRow(cloud.status(), "models", id, "cloud");
+  m.cloud = std::move(*cloud);
+  auto keypoints = decodeIndices(s.columnBlob(14));
+  if (!keypoints.ok()) return inRow(keypoints.status(), "models", id, "keypoints");
+  m.keypoint_indices = std::move(*keypoints);
+  auto descriptors = decodeDescriptors(s.columnBlob(15));
+  if (!descriptors.ok()) return inRow(descriptors.status(), "models", id, "descriptors");
+  m.descriptors = std::move(*descriptors);
+  m.timings = {s.columnDouble(16), s.columnDouble(17), s.columnDouble(18), s.columnDouble(19)};
+  m.structure = s.columnInt(20) != 0;
+  for (uint32_t k : m.keypoint_indices) {
+    if (k >= m.cloud.points.size()) {
+      return absl::DataLossError(absl::StrFormat(
+          "%s: keypoint index %d beyond its %d cloud points", where, k, m.cloud.points.size()));
+    }
+  }
+  if (m.descriptors.size() != m.keypoint_indices.size() && !m.descriptors.empty()) {
+    return absl::DataLossError(absl::StrFormat("%s: %d descriptors for %d keypoints", where,
+                                               m.descriptors.size(), m.keypoint_indices.size()));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement o,
+      Statement::prepare(*lease,
+                         "SELECT o.rowid, s.name, o.label, o.T_world_object, o.T_object_segment "
+                         "FROM observations o JOIN sessions s ON s.id = o.session_id "
+                         "WHERE o.model_id = ? ORDER BY o.seq"));
+  o.bind(1, id);
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool more, o.step());
+    if (!more) break;
+    model::Observation obs;
+    obs.session = o.columnText(1);
+    obs.label = uint32_t(o.columnInt(2));
+    auto T_wo = decodeTransform(o.columnBlob(3));
+    if (!T_wo.ok()) return inRow(T_wo.status(), "observations", o.columnInt(0), "T_world_object");
+    auto T_os = decodeTransform(o.columnBlob(4));
+    if (!T_os.ok()) return inRow(T_os.status(), "observations", o.columnInt(0), "T_object_segment");
+    obs.T_world_object = *T_wo;
+    obs.T_object_segment = *T_os;
+    m.observations.push_back(std::move(obs));
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return std::shared_ptr<const model::ObjectModel>(
+      std::make_shared<model::ObjectModel>(std::move(m)));
+}
+
+StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery& query) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  std::string where = query.include_merged ? "m.state IN ('active', 'merged')" : "m.state = 'active'";
+  if (!query.include_structure) where += " AND m.structure = 0";
+  if (!query.session.empty()) {
+    where += " AND m.id IN (SELECT o.model_id FROM observations o JOIN sessions s ON "
+             "s.id = o.session_id WHERE s.name = ?2)";
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(
+          *lease,
+          absl::StrFormat("SELECT m.id, m.state, COALESCE(m.merged_into, 0), m.planar, "
+                          "m.num_points, m.num_keypoints, COALESCE(m.voxel_size, 0), "
+                          "COALESCE(m.bbox_min_x, 0), COALESCE(m.bbox_min_y, 0), "
+                          "COALESCE(m.bbox_min_z, 0), COALESCE(m.bbox_max_x, 0), "
+                          "COALESCE(m.bbox_max_y, 0), COALESCE(m.bbox_max_z, 0), "
+                          "(SELECT COUNT(*) FROM merge_records r WHERE r.target = m.id), "
+                          "m.structure "
+                          "FROM models m WHERE m.id > ?1 AND %s ORDER BY m.id LIMIT ?3",
+                          where)));
+  s.bind(1, query.after_id);
+  if (!query.session.empty()) s.bind(2, query.session);
+  s.bind(3, int64_t(std::min<size_t>(query.limit, size_t(1) << 30)));
+  std::vector<ModelSummary> out;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    ModelSummary m;
+    m.id = s.columnInt(0);
+    m.state = s.columnText(1);
+    m.merged_into = s.columnInt(2);
+    m.planar = s.columnInt(3) != 0;
+    m.num_points = s.columnInt(4);
+    m.num_keypoints = s.columnInt(5);
+    m.voxel_size = s.columnDouble(6);
+    for (int k = 0; k < 3; ++k) {
+      m.bbox_min[k] = s.columnDouble(7 + k);
+      m.bbox_max[k] = s.columnDouble(10 + k);
+    }
+    m.merges = s.columnInt(13);
+    m.structure = s.columnInt(14) != 0;
+    out.push_back(std::move(m));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement o,
+      Statement::prepare(*lease,
+                         "SELECT o.rowid, s.name, o.label, COALESCE(o.raw_segment_id, 0), "
+                         "o.T_world_object, COALESCE(r.parts, '') FROM observations o JOIN "
+                         "sessions s ON s.id = o.session_id LEFT JOIN raw_segments r ON "
+                         "r.id = o.raw_segment_id WHERE o.model_id = ? ORDER BY o.seq"));
+  for (ModelSummary& m : out) {
+    OBJDB_RETURN_IF_ERROR(o.reset());
+    o.bind(1, m.id);
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool more, o.step());
+      if (!more) break;
+      auto T_wo = decodeTransform(o.columnBlob(4));
+      if (!T_wo.ok()) return inRow(T_wo.status(), "observations", o.columnInt(0), "T_world_object");
+      auto parts = parseParts(o.columnText(5));
+      if (!parts.ok()) return inRow(parts.status(), "raw_segments", o.columnInt(3), "parts");
+      m.observations.push_back(
+          {o.columnText(1), uint32_t(o.columnInt(2)), o.columnInt(3), *T_wo, std::move(*parts)});
+    }
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return out;
+}
+
+StatusOr<std::vector<int64_t>> SqliteStore::modelIds() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, "SELECT id FROM models WHERE state = 'active' ORDER BY id"));
+  std::vector<int64_t> ids;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    ids.push_back(s.columnInt(0));
+  }
+  return ids;
+}
+
+StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease,
+                         "SELECT id, planar, num_points, num_keypoints, descriptors, structure "
+                         "FROM models WHERE state = 'active' ORDER BY id"));
+  database::MatchEntries out;
+  std::map<int64_t, size_t> slot;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    database::MatchEntry e;
+    e.id = s.columnInt(0);
+    e.planar = s.columnInt(1) != 0;
+    e.structure = s.columnInt(5) != 0;
+    e.num_points = size_t(s.columnInt(2));
+    e.num_keypoints = size_t(s.columnInt(3));
+    auto descriptors = decodeDescriptors(s.columnBlob(4));
+    if (!descriptors.ok()) {
+      out.skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
+      continue;
+    }
+    e.descriptors = std::move(*descriptors);
+    slot[e.id] = out.entries.size();
+    out.entries.push_back(std::move(e));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement o,
+      Statement::prepare(*lease,
+                         "SELECT o.model_id, s.name, o.label FROM observations o "
+                         "JOIN sessions s ON s.id = o.session_id ORDER BY o.model_id, o.seq"));
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, o.step());
+    if (!row) break;
+    const auto it = slot.find(o.columnInt(0));
+    if (it == slot.end()) continue;
+    out.entries[it->second].segments.push_back({o.columnText(1), uint32_t(o.columnInt(2))});
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return out;
+}
+
+}  // namespace objdb::storage

@@ -1,0 +1,306 @@
+#include "storage/sqlite/sqlite_store.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <optional>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+#include "core/common/logging.h"
+#include "storage/sqlite/sqlite_store_internal.h"
+
+namespace objdb::storage {
+namespace internal {
+
+Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
+  return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
+}
+
+StatusOr<std::vector<uint32_t>> parseParts(const std::string& text) {
+  std::vector<uint32_t> parts;
+  if (text.empty()) return parts;
+  for (const absl::string_view item : absl::StrSplit(text, ',')) {
+    uint32_t label = 0;
+    if (!absl::SimpleAtoi(item, &label) || label == 0) {
+      return absl::DataLossError(absl::StrFormat("parts \"%s\" is not a list of GSM labels", text));
+    }
+    parts.push_back(label);
+  }
+  return parts;
+}
+
+}  // namespace internal
+
+using internal::inRow;
+using internal::kNow;
+using internal::parseParts;
+
+Status SqliteStoreOptions::validate() const {
+  if (synchronous != "FULL" && synchronous != "NORMAL") {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("storage.synchronous must be FULL or NORMAL, got '%s'", synchronous));
+  }
+  if (!(busy_timeout_ms >= 0 && busy_timeout_ms <= 600000)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("storage.busy_timeout_ms must be in [0, 600000], got %d", busy_timeout_ms));
+  }
+  if (!(max_cached_scenes >= 1 && max_cached_scenes <= 1024)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "storage.max_cached_scenes must be in [1, 1024], got %d", max_cached_scenes));
+  }
+  if (!(max_readers >= 1 && max_readers <= 256)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("storage.max_readers must be in [1, 256], got %d", max_readers));
+  }
+  if (!(journal_size_limit_bytes >= 0)) {
+    return absl::InvalidArgumentError("storage.journal_size_limit_bytes must be >= 0");
+  }
+  return absl::OkStatus();
+}
+
+SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
+    : path_(std::move(path)), options_(std::move(options)) {}
+
+SqliteStore::~SqliteStore() = default;
+
+StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
+                                                         const SqliteStoreOptions& options) {
+  return open(path, options, schemaMigrations());
+}
+
+StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
+                                                         const SqliteStoreOptions& options,
+                                                         const std::vector<Migration>& migrations) {
+  OBJDB_RETURN_IF_ERROR(options.validate());
+  std::error_code ec;
+  const bool exists = std::filesystem::exists(path, ec);
+  if (!exists && (options.read_only || !options.create_if_missing)) {
+    return absl::NotFoundError(absl::StrFormat("no database at %s", path));
+  }
+  if (exists && !std::filesystem::is_regular_file(path, ec)) {
+    return absl::FailedPreconditionError(absl::StrFormat("%s is not a regular file", path));
+  }
+  std::unique_ptr<SqliteStore> store(new SqliteStore(path, options));
+  if (!exists) {
+    // Created here (empty: SQLite sets it up as a new database) so that the store can register
+    // the file before any connection opens it.
+    const int fd = ::open(path.c_str(), O_CREAT | O_EXCL | O_WRONLY | O_CLOEXEC, 0644);
+    if (fd < 0) {
+      return absl::UnavailableError(
+          absl::StrFormat("creating %s: %s", path, std::strerror(errno)));
+    }
+    ::close(fd);  // a new file: no connection of this process has it open
+  }
+  // One writer per file: the server and `objdb ingest` each keep an in-memory copy of what the
+  // database holds (the matcher's index), which a second writer would silently invalidate.
+  OBJDB_ASSIGN_OR_RETURN(FileRegistration registration,
+                         FileRegistration::acquire(path, !options.read_only));
+  store->registration_.emplace(std::move(registration));
+  ConnectionOptions co;
+  co.read_only = options.read_only;
+  co.create = !exists;
+  co.busy_timeout_ms = options.busy_timeout_ms;
+  co.synchronous = options.synchronous;
+  OBJDB_ASSIGN_OR_RETURN(Connection connection, Connection::open(path, co));
+  if (options.quick_check_on_open && exists) {
+    OBJDB_ASSIGN_OR_RETURN(Statement check, Statement::prepare(connection, "PRAGMA quick_check"));
+    auto row = check.step();
+    if (!row.ok()) return annotate(row.status(), absl::StrFormat("%s failed its check", path));
+    const std::string first = *row ? check.columnText(0) : std::string("no result");
+    if (first != "ok") {
+      return absl::DataLossError(absl::StrFormat("%s is corrupt: %s", path, first));
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(store->schema_,
+                         prepareSchema(connection, path, migrations, options.read_only));
+  if (!options.read_only) {
+    OBJDB_RETURN_IF_ERROR(connection.exec(
+        absl::StrFormat("PRAGMA journal_size_limit=%d", options.journal_size_limit_bytes),
+        "setting journal_size_limit"));
+    store->writer_.emplace(std::move(connection));
+  } else {
+    store->idle_readers_.push_back(std::move(connection));
+  }
+  logger("storage")->info("opened {} (schema {}{})", path, store->schema_.version_after,
+                          store->schema_.created ? ", new" : "");
+  return store;
+}
+
+StatusOr<SqliteStore::ReaderLease> SqliteStore::reader() const {
+  {
+    std::lock_guard lock(reader_mutex_);
+    if (!idle_readers_.empty()) {
+      Connection c = std::move(idle_readers_.back());
+      idle_readers_.pop_back();
+      return ReaderLease(this, std::move(c));
+    }
+  }
+  ConnectionOptions co;
+  co.read_only = true;
+  co.busy_timeout_ms = options_.busy_timeout_ms;
+  co.synchronous = options_.synchronous;
+  OBJDB_ASSIGN_OR_RETURN(Connection c, Connection::open(path_, co));
+  return ReaderLease(this, std::move(c));
+}
+
+Status SqliteStore::requireWriter() const {
+  if (!writer_) {
+    return absl::FailedPreconditionError(absl::StrFormat("%s is open read-only", path_));
+  }
+  return absl::OkStatus();
+}
+
+Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
+  if (segment.grid == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat("raw segment %s/%d has no grid",
+                                                      segment.key.session, segment.key.label));
+  }
+  const std::string pose = encodeTransform(segment.T_world_segment);
+  const std::string grid = encodeTsdfGrid(*segment.grid, options_.blobs);
+  if (!segment.voxel_parts.empty() && segment.voxel_parts.size() != segment.voxels.size()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "raw segment %s/%d: %d voxel parts for %d voxels", segment.key.session, segment.key.label,
+        segment.voxel_parts.size(), segment.voxels.size()));
+  }
+  const std::string voxels = encodeVoxelList(segment.voxels, options_.blobs);
+  const std::string voxel_parts =
+      segment.voxel_parts.empty() ? std::string() : encodeIndices(segment.voxel_parts, options_.blobs);
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  const std::string context =
+      absl::StrFormat("storing raw segment %s/%d", segment.key.session, segment.key.label);
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(segment.key.session));
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement s,
+        Statement::prepare(
+            *writer_,
+            absl::StrFormat(
+                "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
+                "extraction_frame, observation_depth_m, parts, voxel_parts, extracted_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, %s) "
+                "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
+                "grid = excluded.grid, voxels = excluded.voxels, "
+                "extraction_frame = excluded.extraction_frame, "
+                "observation_depth_m = excluded.observation_depth_m, parts = excluded.parts, "
+                "voxel_parts = excluded.voxel_parts, extracted_at = excluded.extracted_at",
+                kNow)));
+    s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, pose).bindBlob(4, grid);
+    s.bindBlob(5, voxels).bind(6, segment.extraction_frame);
+    s.bind(7, double(segment.observation_depth_m)).bind(8, absl::StrJoin(segment.parts, ","));
+    if (segment.voxel_parts.empty()) {
+      s.bindNull(9);
+    } else {
+      s.bindBlob(9, voxel_parts);
+    }
+    OBJDB_RETURN_IF_ERROR(s.run());
+    return txn.commit();
+  };
+  return annotate(body(), context);
+}
+
+StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegment(
+    const database::SegmentKey& key) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease,
+                         "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame, "
+                         "r.observation_depth_m, r.parts, r.voxel_parts "
+                         "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
+                         "WHERE s.name = ? AND r.label = ?"));
+  s.bind(1, key.session).bind(2, int64_t(key.label));
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  if (!row) {
+    return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+  }
+  const int64_t id = s.columnInt(0);
+  auto record = std::make_shared<database::RawSegmentRecord>();
+  record->key = key;
+  auto pose = decodeTransform(s.columnBlob(1));
+  if (!pose.ok()) return inRow(pose.status(), "raw_segments", id, "pose");
+  record->T_world_segment = *pose;
+  auto grid = decodeTsdfGrid(s.columnBlob(2));
+  if (!grid.ok()) return inRow(grid.status(), "raw_segments", id, "grid");
+  record->grid = std::make_shared<const tsdf::TsdfLayer>(std::move(*grid));
+  auto voxels = decodeVoxelList(s.columnBlob(3));
+  if (!voxels.ok()) return inRow(voxels.status(), "raw_segments", id, "voxels");
+  record->voxels = std::move(*voxels);
+  record->extraction_frame = s.columnInt(4);
+  record->observation_depth_m = float(s.columnDouble(5));
+  auto parts = parseParts(s.columnText(6));
+  if (!parts.ok()) return inRow(parts.status(), "raw_segments", id, "parts");
+  record->parts = std::move(*parts);
+  if (!s.columnIsNull(7)) {
+    auto voxel_parts = decodeIndices(s.columnBlob(7));
+    if (!voxel_parts.ok()) return inRow(voxel_parts.status(), "raw_segments", id, "voxel_parts");
+    if (voxel_parts->size() != record->voxels.size()) {
+      return inRow(absl::DataLossError(absl::StrFormat("%d voxel parts for %d voxels",
+                                                       voxel_parts->size(), record->voxels.size())),
+                   "raw_segments", id, "voxel_parts");
+    }
+    record->voxel_parts = std::move(*voxel_parts);
+  }
+  return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
+}
+
+StatusOr<int64_t> SqliteStore::rawSegmentId(const database::SegmentKey& key) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease,
+                                            "SELECT r.id FROM raw_segments r JOIN sessions s ON "
+                                            "s.id = r.session_id WHERE s.name = ? AND r.label = ?"));
+  s.bind(1, key.session).bind(2, int64_t(key.label));
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  if (!row) {
+    return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+  }
+  return s.columnInt(0);
+}
+
+StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecords() const {
+  return readMergeRecords(std::nullopt);
+}
+
+StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecordsInto(int64_t target) const {
+  return readMergeRecords(target);
+}
+
+StatusOr<std::vector<database::MergeRecord>> SqliteStore::readMergeRecords(
+    std::optional<int64_t> target) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, absl::StrFormat("SELECT id, target, source, transform, "
+                                                 "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
+                                                 "scene_checks FROM merge_records %s ORDER BY id",
+                                                 target ? "WHERE target = ?" : "")));
+  if (target) s.bind(1, *target);
+  std::vector<database::MergeRecord> records;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    database::MergeRecord r;
+    r.target = s.columnInt(1);
+    r.source = s.columnText(2);
+    auto T = decodeTransform(s.columnBlob(3));
+    if (!T.ok()) return inRow(T.status(), "merge_records", s.columnInt(0), "transform");
+    r.T_target_source = *T;
+    r.icp_rmse_m = s.columnDouble(4);
+    r.tsdf_rmse_m = s.columnDouble(5);
+    r.tsdf_overlap = size_t(s.columnInt(6));
+    r.scene_checks = size_t(s.columnInt(7));
+    records.push_back(std::move(r));
+  }
+  return records;
+}
+
+}  // namespace objdb::storage

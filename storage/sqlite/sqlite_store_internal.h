@@ -1,0 +1,71 @@
+// Private to storage/sqlite/: what the files of SqliteStore's implementation share (the time
+// expression of every row, the map tables, row-annotated blob errors, the reader lease). Not
+// included outside storage/sqlite/.
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/status.h"
+#include "storage/sqlite/sqlite_store.h"
+#include "storage/sqlite/sqlite_util.h"
+
+namespace objdb::storage {
+namespace internal {
+
+// SQL for "now" as the rows keep times: ISO-8601 UTC with milliseconds.
+inline constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
+
+// The tables of one kind of stored map: a session's scene map, or its saved live map.
+struct MapTables {
+  const char* what;  // in messages: "scene" or "saved map"
+  const char* maps;
+  const char* blocks;
+  const char* label_blocks;
+  bool has_frames;  // the map table has a `frames` column
+};
+
+inline constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks",
+                                        "scene_label_blocks", false};
+inline constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks",
+                                        "saved_label_blocks", true};
+
+// Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
+Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column);
+
+// raw_segments.parts: GSM labels, comma-separated ("" = none recorded: a segment stored before
+// schema 4). Anything else is damage.
+StatusOr<std::vector<uint32_t>> parseParts(const std::string& text);
+
+}  // namespace internal
+
+// A reader connection borrowed from the pool, given back when the lease ends.
+class SqliteStore::ReaderLease {
+ public:
+  ReaderLease(const SqliteStore* store, Connection connection)
+      : store_(store), connection_(std::move(connection)) {}
+  ReaderLease(ReaderLease&& other) noexcept
+      : store_(other.store_), connection_(std::move(other.connection_)) {
+    other.store_ = nullptr;
+    other.connection_.reset();
+  }
+  ReaderLease& operator=(ReaderLease&&) = delete;
+  ~ReaderLease() {
+    if (!connection_ || connection_->get() == nullptr || store_ == nullptr) return;
+    std::lock_guard lock(store_->reader_mutex_);
+    if (store_->idle_readers_.size() < size_t(store_->options_.max_readers)) {
+      store_->idle_readers_.push_back(std::move(*connection_));
+    }
+  }
+  const Connection& operator*() const { return *connection_; }
+
+ private:
+  const SqliteStore* store_;
+  std::optional<Connection> connection_;
+};
+
+}  // namespace objdb::storage

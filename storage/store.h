@@ -1,0 +1,156 @@
+// The server's storage interface (DESIGN.md "Persistence"): core/database's ModelStore plus what
+// the service needs beyond it — sessions, saved live maps, model listings, checks, statistics,
+// checkpoints and online backups — and the plain value types those use. Backends implement it:
+// storage/sqlite/ (SqliteStore, one embedded file); storage/open_store.h opens one.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/common/intrinsics.h"
+#include "core/common/status.h"
+#include "core/common/transform.h"
+#include "core/database/model_store.h"
+
+namespace objdb::storage {
+
+enum class SessionState { kOpen, kEnded, kInterrupted };
+const char* sessionStateName(SessionState state);
+
+// SessionInfo::intrinsics_json of `intrinsics`: {"width", "height", "fx", "fy", "cx", "cy"}.
+std::string intrinsicsJson(const Intrinsics& intrinsics);
+
+struct SessionInfo {
+  int64_t id = 0;
+  std::string name;
+  std::string intrinsics_json;  // as the client sent them
+  std::string params_json;      // effective parameters of the session
+  std::string started_at, ended_at;  // ISO-8601 UTC; ended_at empty while open
+  SessionState state = SessionState::kOpen;
+  int64_t frames = 0;
+};
+
+// An open session's map as the server last saved it: its TSDF and main labels after `frames`
+// frames. `map` is null when none is saved.
+struct SavedMap {
+  int64_t frames = 0;
+  std::shared_ptr<const tsdf::TsdfLayer> map;
+  std::shared_ptr<const gsm::LabelBlocks> labels;
+};
+
+// A blob (or a row) that could not be read back.
+struct Damage {
+  std::string table;
+  int64_t row = 0;       // rowid / model id
+  std::string column;
+  std::string problem;
+};
+
+struct CheckReport {
+  // The database engine's own integrity findings (SQLite: PRAGMA integrity_check lines other
+  // than "ok", and foreign key violations).
+  std::vector<std::string> sqlite_findings;
+  std::vector<Damage> damaged;              // blobs failing their checks
+  size_t blobs_checked = 0;
+  bool ok() const { return sqlite_findings.empty() && damaged.empty(); }
+};
+
+struct TableStats {
+  std::string table;
+  int64_t rows = 0;
+  int64_t blob_bytes = 0;  // sum of blob lengths in the table
+};
+
+struct StoreStats {
+  int schema_version = 0;
+  int64_t file_bytes = 0;  // SQLite: page_count · page_size (WAL not included)
+  int64_t active_models = 0, removed_models = 0, merged_models = 0;
+  std::vector<TableStats> tables;
+};
+
+struct BackupReport {
+  int64_t pages = 0;
+  int64_t bytes = 0;  // pages · page size
+};
+
+// One model's row without its blobs, with its observations: what listings need (ListObjects,
+// GetObject), cheap to read for many models.
+struct ModelSummary {
+  struct Pose {
+    std::string session;
+    uint32_t label = 0;           // GSM label of the observing raw segment
+    int64_t raw_segment_id = 0;   // raw_segments row (0 when the segment row is gone)
+    Transform T_world_object = Transform::Identity();
+    std::vector<uint32_t> parts;  // the raw segment's GSM labels (its object's parts), sorted
+  };
+  int64_t id = 0;
+  std::string state;             // "active" or "merged" (removed models are never listed)
+  int64_t merged_into = 0;       // state "merged": the model that absorbed it
+  bool planar = false;
+  bool structure = false;        // room structure (core/model/structure.h): never matched
+  int64_t num_points = 0, num_keypoints = 0;
+  double voxel_size = 0.0;
+  Eigen::Vector3d bbox_min = Eigen::Vector3d::Zero(), bbox_max = Eigen::Vector3d::Zero();  // model frame
+  std::vector<Pose> observations;  // insertion order
+  int64_t merges = 0;              // merge records with this model as target
+};
+
+// Which models modelSummaries() returns: ids above after_id, ascending, at most `limit`.
+struct ModelQuery {
+  int64_t after_id = 0;
+  size_t limit = 100;
+  std::string session;          // only models observed in this session; empty = all
+  bool include_merged = false;  // also models in state "merged"
+  bool include_structure = true;  // false: only models not flagged room structure
+};
+
+// Everything the server asks of its database. Every mutation is one transaction; every read of
+// several rows sees one snapshot. Thread-safe.
+class Store : public database::ModelStore {
+ public:
+  ~Store() override = default;
+
+  // What the store is, for logs and messages (SqliteStore: its file's path).
+  virtual std::string describe() const = 0;
+  // Bytes the database takes on disk now (SqliteStore: the file, its -wal and its -shm).
+  virtual int64_t diskBytes() const = 0;
+
+  // The merge records whose target is model `target`, oldest first.
+  virtual StatusOr<std::vector<database::MergeRecord>> mergeRecordsInto(int64_t target) const = 0;
+
+  // The live map of an open session, saved now and then so that a crash loses only what came
+  // after (replacing the earlier save). It is not the session's scene map: scene() does not see
+  // it, and finishSession(kEnded) deletes it.
+  virtual Status putSavedMap(const std::string& session, int64_t frames,
+                             const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels) = 0;
+  virtual StatusOr<SavedMap> savedMap(const std::string& session) const = 0;
+  // The frame count of the session's saved map without reading it; −1 when none is saved.
+  virtual StatusOr<int64_t> savedMapFrames(const std::string& session) const = 0;
+  virtual Status dropSavedMap(const std::string& session) = 0;
+
+  // Model rows without blobs (see ModelQuery), one snapshot.
+  virtual StatusOr<std::vector<ModelSummary>> modelSummaries(const ModelQuery& query) const = 0;
+  // The id of a stored raw segment (NOT_FOUND when none has that key).
+  virtual StatusOr<int64_t> rawSegmentId(const database::SegmentKey& key) const = 0;
+
+  // Sessions. beginSession creates the session (ALREADY_EXISTS when the name is taken);
+  // a session row is also created implicitly, state open, by the first data stored for it.
+  virtual StatusOr<SessionInfo> beginSession(const SessionInfo& info) = 0;
+  virtual Status finishSession(const std::string& name, SessionState state, int64_t frames) = 0;
+  virtual StatusOr<std::vector<SessionInfo>> sessions() const = 0;
+
+  // The engine's integrity check plus every blob's checks.
+  virtual StatusOr<CheckReport> check() const = 0;
+  virtual StatusOr<StoreStats> stats() const = 0;
+  // Makes everything committed durable in the database proper (clean shutdown; SqliteStore:
+  // copies the WAL into the file and truncates it).
+  virtual Status checkpoint() = 0;
+  // An online backup: a consistent copy of the database in a new file at `path`, while writers
+  // carry on. `path` is whole or absent and never replaced: an existing one is ALREADY_EXISTS.
+  virtual StatusOr<BackupReport> backupTo(const std::string& path) const = 0;
+};
+
+}  // namespace objdb::storage
