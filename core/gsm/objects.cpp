@@ -200,7 +200,8 @@ const std::array<Eigen::Vector3i, 26>& neighbours26() {
 void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::VoxelIndex>& voxels,
                const absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>>& voxels_of,
                const LabelLookup& lookup, const tsdf::TsdfLayer& layer,
-               const std::vector<Eigen::Vector3i>& touching, float max_height, ObjectGroups* out) {
+               const std::vector<Eigen::Vector3i>& touching, float max_height,
+               const std::vector<Label>& floating, int min_island, ObjectGroups* out) {
   // Heights of the surface each voxel holds above the plane, in voxels: the voxel centre's less
   // its TSDF distance (the surface lies that far below a voxel on the observed side), so the
   // lattice does not quantise them. A floor's own voxels are then at its noise, a base disc 3 cm
@@ -266,6 +267,58 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
       if (!off.contains(key) || part_of.contains(key) || !inside(object, n)) continue;
       part_of.emplace(key, part);
       queue.emplace_back(n, part);
+    }
+  }
+  // Islands: the off-plane voxels no object reached, in connected pieces. A piece under an object
+  // that floats above the annexed band (see objects.h) is its foot: a pedestal chair's base when
+  // the column between them carries no label. Its voxels inside the footprint of the floating
+  // object whose footprint holds most of it (at least half) join that object, as the part nearest
+  // the plane.
+  if (!floating.empty()) {
+    // Each floating object's lowest voxel above the plane and the member label holding it.
+    absl::flat_hash_map<Label, std::pair<float, Label>> lowest;
+    for (const Label object : floating) {
+      std::pair<float, Label> low{1e30f, 0};
+      for (const Label l : out->members.at(object)) {
+        for (const auto& v : voxels_of.at(l)) {
+          const float h = (v.cast<float>() - plane.centroid).dot(plane.normal) - float(mean);
+          if (h < low.first) low = {h, l};
+        }
+      }
+      lowest.emplace(object, low);
+    }
+    absl::flat_hash_set<uint64_t> seen;
+    for (const auto& start : candidates) {
+      if (part_of.contains(packGridKey(start)) || !seen.insert(packGridKey(start)).second) continue;
+      std::vector<tsdf::VoxelIndex> island{start};
+      for (size_t head = 0; head < island.size(); ++head) {
+        for (const Eigen::Vector3i& o : neighbours26()) {
+          const tsdf::VoxelIndex n = island[head] + o;
+          const uint64_t key = packGridKey(n);
+          if (!off.contains(key) || part_of.contains(key) || !seen.insert(key).second) continue;
+          island.push_back(n);
+        }
+      }
+      if (int(island.size()) < min_island) continue;
+      Label best = 0;
+      size_t best_inside = 0;
+      for (const Label object : floating) {
+        if (lowest.at(object).first <= max_height) continue;  // not above the band
+        size_t n = 0;
+        for (const auto& v : island) n += inside(object, v) ? 1 : 0;
+        if (2 * n >= island.size() && n > best_inside) {
+          best = object;
+          best_inside = n;
+        }
+      }
+      if (best == 0) continue;
+      const Label part = lowest.at(best).second;
+      for (const auto& v : island) {
+        if (!inside(best, v)) continue;  // the footprint bounds what an object takes
+        part_of.emplace(packGridKey(v), part);
+        queue.emplace_back(v, part);
+      }
+      ++out->islands;
     }
   }
   for (const auto& [v, part] : queue) {
@@ -510,8 +563,8 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       unite(upper, support);
     }
   }
-  if (params.object_shadow_gap_m > 0.0f) {
-    // The objects (roots) standing on something: touching structure, or resting on a support.
+  // The objects (roots) standing on something: touching structure, or resting on a support.
+  const auto groundedObjects = [&] {
     absl::flat_hash_set<Label> grounded;
     for (const auto& [key, count] : touches_structure) {
       if (count >= params.object_min_contact_voxels) grounded.insert(findRoot(&parent, Label(key >> 32)));
@@ -521,6 +574,10 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
         grounded.insert(findRoot(&parent, upper));
       }
     }
+    return grounded;
+  };
+  if (params.object_shadow_gap_m > 0.0f) {
+    const absl::flat_hash_set<Label> grounded = groundedObjects();
     const auto floating = [&](Label l) { return !grounded.contains(findRoot(&parent, l)); };
     joinAcrossShadows(shapes, voxels_of, touches_structure, lookup, layer, r,
                       int(std::floor(params.object_shadow_gap_m / voxel + 1e-3f)),
@@ -536,11 +593,18 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     for (const Label l : members) out.object_of[l] = id;
   }
   if (params.object_annex_height_m > 0.0f) {
+    // The objects that float as finally grouped (ascending id).
+    const absl::flat_hash_set<Label> grounded = groundedObjects();
+    std::vector<Label> floating;
+    for (const auto& [id, members] : out.members) {
+      if (!out.structure.contains(id) && !grounded.contains(id)) floating.push_back(id);
+    }
     std::vector<Label> structure(out.structure.begin(), out.structure.end());
     std::sort(structure.begin(), structure.end());
     for (const Label l : structure) {
       annexFrom(l, shapes[l], voxels_of[l], voxels_of, lookup, layer, offsets,
-                params.object_annex_height_m / voxel, &out);
+                params.object_annex_height_m / voxel, floating, params.object_min_contact_voxels,
+                &out);
     }
   }
   return out;

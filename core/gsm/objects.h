@@ -36,7 +36,13 @@
 // object. A chair's or a table's base disc is 3 cm high: the segmenter finds no edge between it
 // and the floor, so its voxels are voted into the floor's label, but they stand off the floor's
 // plane. They join the object as part of the label they touch (breadth first from every
-// touching voxel at once, in voxel order), and leave the structure's segment.
+// touching voxel at once, in voxel order), and leave the structure's segment. What no object
+// reaches that way falls into connected islands. An object that floats (as finally grouped it
+// touches no structure and rests on no support) entirely above the annexed band takes an island
+// that lies at least half inside its footprint, as the member label nearest the plane: the
+// column of a pedestal chair seen from afar is too thin to carry a label, and its seat floats
+// over the base. Of several such objects the one whose footprint holds most of the island takes
+// it. An object standing on its legs takes no island: a mat under a table stays floor.
 #pragma once
 
 #include <map>
@@ -69,6 +75,7 @@ struct ObjectGroups {
   size_t contacts = 0;  // label pairs that touch (neither structure)
   size_t supports = 0;  // of them, not connected because one rests on the other
   size_t shadow_joins = 0;  // label pairs connected across a shadow
+  size_t islands = 0;       // pieces of structure taken by a floating object above them
 
   // The part a map voxel with main label `label` counts as: the annexing object's part for an
   // annexed voxel, else `label` itself. The object is object_of of that.

@@ -376,6 +376,52 @@ TEST(Objects, WithoutAnnexingTheBaseStaysWithTheFloor) {
   EXPECT_TRUE(map.groups.annexed_part.empty());
 }
 
+TEST(Objects, AFloatingSeatTakesTheBaseUnderItWhenItsColumnCarriesNoLabel) {
+  // At a coarse camera the thin column gets no segment (fused as surface, never labelled): the
+  // seat touches nothing and floats, and no labelled voxel reaches the base. The base, an island
+  // of floor voxels off the floor's plane under the seat's footprint, is the seat's foot.
+  Grouped out{Scene(), makeGsm(), {}, {}};
+  out.scene.addPedestalChair(Eigen::Vector3d::Zero(), 10);
+  out.label_of = out.scene.fuse(&out.gsm, Eigen::Vector3d(0, 0, 0.3), 16, 0.0, {1, 10});
+  out.groups = out.gsm.groupObjects();
+  const ObjectGroups& g = out.groups;
+  ASSERT_FALSE(out.label_of.count(11));
+  const Label chair = objectOf(g, out.label_of, 10);
+  ASSERT_NE(chair, 0u);
+  EXPECT_GE(g.islands, 1u);
+  ASSERT_TRUE(g.annexed.count(chair));
+  const std::vector<AnnexedVoxel>& base = g.annexed.at(chair);
+  EXPECT_GE(base.size(), 150u) << "most of the base's top (a disc of 0.2 m², 490 voxels)";
+  for (const AnnexedVoxel& a : base) {
+    const Eigen::Vector3f c = out.gsm.tsdf().voxelCenter(a.voxel);
+    EXPECT_GT(c.z(), 0.0f);
+    EXPECT_LT(c.z(), 0.1f);
+    EXPECT_LT(c.head<2>().norm(), 0.25f + 0.05f);
+    EXPECT_EQ(out.gsm.mainLabel(a.voxel), out.label_of.at(1)) << "a floor voxel";
+    EXPECT_EQ(a.part, out.label_of.at(10)) << "joined as part of the seat, its only part";
+  }
+}
+
+TEST(Objects, AMatUnderAShelfOnTheWallStaysWithTheFloor) {
+  // A mat 3 cm high, segmented with the floor, under a shelf board 0.5 m up: an island off the
+  // floor's plane under the board's footprint, with the board above the annexed band. But the
+  // board is fixed to a wall (structure, instance 2), so nothing unseen carries it and the mat
+  // is no foot of it.
+  Scene scene;
+  scene.addBox({3.0f, 0.1f, 2.0f}, Eigen::Vector3d(0, -0.25, 1.0), 2);
+  scene.addBox({0.6f, 0.3f, 0.03f}, Eigen::Vector3d(0, 0.0, 0.5), 10);
+  scene.addBox({0.5f, 0.25f, 0.03f}, Eigen::Vector3d(0, 0.0, 0.015), 1);
+  Gsm gsm = makeGsm();
+  const auto label_of = scene.fuse(&gsm, Eigen::Vector3d(0, 0, 0.3));
+  const ObjectGroups g = gsm.groupObjects();
+  const Label shelf = objectOf(g, label_of, 10);
+  ASSERT_NE(shelf, 0u);
+  ASSERT_TRUE(g.structure.contains(label_of.at(2))) << "the wall is structure";
+  EXPECT_NE(shelf, objectOf(g, label_of, 2));
+  EXPECT_EQ(g.islands, 0u);
+  EXPECT_FALSE(g.annexed.count(shelf));
+}
+
 // A table (top 0.95 × 0.95 m at 0.70–0.74 m, instance 10, with four legs 11 … 14 or without)
 // and a post (instance 30, 0.1 × 0.1 m, 0.45 m high) under the middle of its top. Seen from
 // 2.5 m, the top's shadow reaches down to ~0.2 m there: the post's upper half and the 0.25 m
