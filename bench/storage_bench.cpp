@@ -3,9 +3,11 @@
 // ISS ∪ Harris3D keypoints and FPFH descriptors built by core/model exactly as the database does.
 // Prints insert and load throughput (models/s, MB/s of blobs), the time to open a database of N
 // models (with its quick_check) and to load the index the matcher needs (descriptors of every
-// model into the kd-tree), and the file size. Not a test: figures vary with the machine.
+// model into the kd-tree), the database's incremental prefilter index (a model put per insert,
+// its query against one tree's), and the file size. Not a test: figures vary with the machine.
 //
 //   build/bin/storage_bench [--models 1000] [--dir /tmp] [--synchronous FULL|NORMAL]
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -16,6 +18,8 @@
 #include "absl/strings/str_format.h"
 #include "bench/chair_model.h"
 #include "core/common/logging.h"
+#include "core/common/params.h"
+#include "core/database/prefilter_index.h"
 #include "core/matching/registration.h"
 #include "core/model/features.h"
 #include "core/model/object_model.h"
@@ -141,6 +145,38 @@ int main(int argc, char** argv) {
   const double index_s = secondsSince(t);
   const auto stats = (*reopened)->stats().value();
 
+  // The prefilter as the database keeps it (core/database/prefilter_index.h): loaded once, then
+  // one model put per insert, against a full rebuild of the one kd-tree per insert (before).
+  database::PrefilterIndex prefilter;
+  std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> loaded;
+  for (const auto& e : entries.entries) loaded.emplace_back(e.id, &e.descriptors);
+  t = Clock::now();
+  prefilter.load(loaded);
+  const double prefilter_load_s = secondsSince(t);
+  const int puts = 200;
+  std::vector<double> put_ms;
+  const size_t built_before = prefilter.rebuilt();
+  for (int i = 0; i < puts; ++i) {
+    t = Clock::now();
+    prefilter.put(int64_t(ids.back()) + 1 + i, kinds[size_t(i) % kinds.size()].descriptors);
+    put_ms.push_back(1000.0 * secondsSince(t));
+  }
+  std::vector<double> sorted = put_ms;
+  std::sort(sorted.begin(), sorted.end());
+  double put_total_ms = 0;
+  for (const double ms : put_ms) put_total_ms += ms;
+  // One insert's prefilter query: every descriptor of a chair, its nearest (the default
+  // database.prefilter_neighbours), on the one tree and on the incremental index.
+  const Params defaults;
+  const auto& query = kinds.front().descriptors;
+  const int k = defaults.database.prefilter_neighbours;
+  t = Clock::now();
+  for (const auto& d : query) (void)index.nearest(d, k);
+  const double query_tree_ms = 1000.0 * secondsSince(t);
+  t = Clock::now();
+  for (const auto& d : query) (void)prefilter.nearest(d, k);
+  const double query_prefilter_ms = 1000.0 * secondsSince(t);
+
   std::printf("\n%d models, synchronous=%s, file %.1f MB\n", models, synchronous.c_str(),
               double(stats.file_bytes) / 1e6);
   std::printf("%-44s %10s %10s %10s\n", "", "seconds", "models/s", "MB/s");
@@ -152,6 +188,17 @@ int main(int argc, char** argv) {
   std::printf("%-44s %10.3f   (%zu descriptors)\n", "matcher index: read descriptors", entries_s,
               all.size());
   std::printf("%-44s %10.3f\n", "matcher index: build the kd-tree", index_s);
+  std::printf("\nprefilter, %zu models loaded, then %d more put one at a time (one per insert)\n",
+              entries.entries.size(), puts);
+  std::printf("%-44s %10.3f\n", "load (one tree, at open)", prefilter_load_s);
+  std::printf("%-44s %10.2f ms median, %.2f p99, %.2f max, %.2f mean\n", "put one model",
+              sorted[sorted.size() / 2], sorted[size_t(0.99 * double(sorted.size() - 1))],
+              sorted.back(), put_total_ms / puts);
+  std::printf("%-44s %10.1f   (descriptors per put; a full rebuild per insert: %zu)\n",
+              "  kd-tree work", double(prefilter.rebuilt() - built_before) / puts, all.size());
+  std::printf("%-44s %10zu\n", "  trees after the puts", prefilter.trees());
+  std::printf("%-44s %10.2f ms one tree, %.2f incremental (%zu descriptors, k %d)\n",
+              "one insert's query", query_tree_ms, query_prefilter_ms, query.size(), k);
   std::printf("(%zu points loaded)\n", points);
   return 0;
 }

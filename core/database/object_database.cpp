@@ -31,10 +31,12 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
   std::unique_ptr<ObjectDatabase> db(new ObjectDatabase(params, store));
   // Which model holds which segment, from the store (a reopened database carries on).
   OBJDB_ASSIGN_OR_RETURN(const MatchEntries entries, store->matchEntries());
+  std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> matchable;
   for (const auto& e : entries.entries) {
     for (const auto& key : e.segments) db->segment_model_[key] = e.id;
-    db->entries_[e.id] = e;
+    if (e.matchable(params.model)) matchable.emplace_back(e.id, &e.descriptors);
   }
+  db->prefilter_.load(matchable);
   for (const auto& skipped : entries.skipped) {
     logger("database")->error("object database: a stored model is unreadable and left out: {}",
                               std::string(skipped.message()));
@@ -170,13 +172,11 @@ StatusOr<int64_t> ObjectDatabase::withdrawSegment(const std::string& session, gs
 void ObjectDatabase::changed(int64_t model_id, std::optional<MatchEntry> entry) {
   std::lock_guard lock(mutex_);
   indices_.erase(model_id);
-  if (entry) {
-    entry->id = model_id;
-    entries_[model_id] = std::move(*entry);
+  if (entry && entry->matchable(params_.model)) {
+    prefilter_.put(model_id, entry->descriptors);
   } else {
-    entries_.erase(model_id);
+    prefilter_.erase(model_id);
   }
-  global_dirty_ = true;
 }
 
 std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
@@ -193,28 +193,13 @@ std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
 
 StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model) {
   std::lock_guard lock(mutex_);
-  if (global_dirty_) {
-    // From the entries kept in memory (loaded at create, updated by every change this database
-    // makes): no store reads per insert.
-    std::vector<model::Fpfh> all;
-    global_owner_.clear();
-    for (const auto& [id, e] : entries_) {
-      if (!e.matchable(params_.model)) continue;
-      for (const auto& d : e.descriptors) {
-        all.push_back(d);
-        global_owner_.push_back(e.id);
-      }
-    }
-    global_ = std::make_unique<matching::DescriptorIndex>(all);
-    global_dirty_ = false;
-  }
   std::map<int64_t, int> votes;
   std::set<int64_t> voted;
   for (const auto& d : model.descriptors) {
     voted.clear();
-    for (const auto& [index, similarity] : global_->nearest(d, params_.database.prefilter_neighbours)) {
+    for (const auto& [owner, similarity] :
+         prefilter_.nearest(d, params_.database.prefilter_neighbours)) {
       if (similarity < params_.matching.similarity_threshold) continue;
-      const int64_t owner = global_owner_[index];
       if (owner != model.id && voted.insert(owner).second) ++votes[owner];
     }
   }

@@ -18,6 +18,7 @@
 #include "core/common/params.h"
 #include "core/common/status.h"
 #include "core/database/model_store.h"
+#include "core/database/prefilter_index.h"
 #include "core/gsm/gsm.h"
 #include "core/matching/registration.h"
 #include "core/matching/verification.h"
@@ -161,12 +162,9 @@ class ObjectDatabase {
   std::mutex mutex_;  // guards the caches below
   std::map<int64_t, std::shared_ptr<const matching::DescriptorIndex>> indices_;
   std::map<SegmentKey, int64_t> segment_model_;  // which model holds each segment
-  // What the prefilter needs of every stored model; the database is the store's only writer.
-  std::map<int64_t, MatchEntry> entries_;
-  // Global descriptor index for the prefilter: descriptors of every matchable model.
-  std::unique_ptr<matching::DescriptorIndex> global_;
-  std::vector<int64_t> global_owner_;
-  bool global_dirty_ = true;
+  // The prefilter's descriptors of every matchable stored model, updated by every change this
+  // database makes (it is the store's only writer): no store reads and no rebuild per insert.
+  PrefilterIndex prefilter_;
 };
 
 }  // namespace objdb::database

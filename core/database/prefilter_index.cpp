@@ -1,0 +1,137 @@
+#include "core/database/prefilter_index.h"
+
+#include <algorithm>
+#include <tuple>
+
+namespace objdb::database {
+
+bool PrefilterIndex::alive(const Tree& tree, size_t i) const {
+  const auto it = where_.find(tree.owner[i]);
+  return it != where_.end() && it->second.tree == &tree && tree.sequence[i] >= it->second.first;
+}
+
+std::unique_ptr<PrefilterIndex::Tree> PrefilterIndex::rebuild(
+    std::vector<std::unique_ptr<Tree>> trees) {
+  auto out = std::make_unique<Tree>();
+  for (const auto& t : trees) {
+    for (size_t i = 0; i < t->descriptors.size(); ++i) {
+      if (!alive(*t, i)) continue;
+      out->descriptors.push_back(t->descriptors[i]);
+      out->owner.push_back(t->owner[i]);
+      out->sequence.push_back(t->sequence[i]);
+    }
+  }
+  for (size_t i = 0; i < out->owner.size(); ++i) where_[out->owner[i]].tree = out.get();
+  if (out->descriptors.empty()) return nullptr;
+  out->index = std::make_unique<matching::DescriptorIndex>(out->descriptors);
+  rebuilt_ += out->descriptors.size();
+  return out;
+}
+
+void PrefilterIndex::kill(int64_t id) {
+  const auto it = where_.find(id);
+  if (it == where_.end()) return;
+  Tree* tree = it->second.tree;
+  tree->dead += it->second.count;
+  live_ -= it->second.count;
+  where_.erase(it);
+  if (2 * tree->dead < tree->descriptors.size()) return;
+  const auto slot = std::find_if(trees_.begin(), trees_.end(),
+                                 [&](const std::unique_ptr<Tree>& t) { return t.get() == tree; });
+  std::vector<std::unique_ptr<Tree>> one;
+  one.push_back(std::move(*slot));
+  std::unique_ptr<Tree> rebuilt = rebuild(std::move(one));
+  if (rebuilt) {
+    *slot = std::move(rebuilt);
+  } else {
+    trees_.erase(slot);
+  }
+}
+
+void PrefilterIndex::load(
+    const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models) {
+  auto tree = std::make_unique<Tree>();
+  for (const auto& [id, descriptors] : models) {
+    kill(id);
+    if (descriptors->empty()) continue;
+    where_[id] = Place{tree.get(), next_sequence_, descriptors->size()};
+    for (const auto& d : *descriptors) {
+      tree->descriptors.push_back(d);
+      tree->owner.push_back(id);
+      tree->sequence.push_back(next_sequence_++);
+    }
+    live_ += descriptors->size();
+  }
+  if (tree->descriptors.empty()) return;
+  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors);
+  rebuilt_ += tree->descriptors.size();
+  trees_.push_back(std::move(tree));
+}
+
+void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors) {
+  kill(id);
+  if (descriptors.empty()) return;
+  auto tree = std::make_unique<Tree>();
+  tree->descriptors = descriptors;
+  tree->owner.assign(descriptors.size(), id);
+  const uint64_t first = next_sequence_;
+  for (size_t i = 0; i < descriptors.size(); ++i) tree->sequence.push_back(next_sequence_++);
+  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors);
+  rebuilt_ += descriptors.size();
+  where_[id] = Place{tree.get(), first, descriptors.size()};
+  live_ += descriptors.size();
+  trees_.push_back(std::move(tree));
+  // Binary-counter merging: the newest two become one while the older is at most twice the newer.
+  while (trees_.size() >= 2 &&
+         trees_[trees_.size() - 2]->live() <= 2 * trees_.back()->live()) {
+    std::vector<std::unique_ptr<Tree>> two;
+    two.push_back(std::move(trees_[trees_.size() - 2]));
+    two.push_back(std::move(trees_.back()));
+    trees_.resize(trees_.size() - 2);
+    std::unique_ptr<Tree> merged = rebuild(std::move(two));
+    if (merged) trees_.push_back(std::move(merged));
+  }
+}
+
+void PrefilterIndex::erase(int64_t id) { kill(id); }
+
+std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh& query,
+                                                               int k) const {
+  // The trees' k nearest are by Euclidean distance, so the merge is too: (distance², owner,
+  // sequence, similarity).
+  std::vector<std::tuple<float, int64_t, uint64_t, float>> found;
+  if (k <= 0) return {};
+  for (const auto& tree : trees_) {
+    // The k nearest live ones of this tree: ask for k (more when it has dead ones), and again for
+    // four times as many while dead ones among them leave fewer than k and the tree has more.
+    const size_t n = tree->descriptors.size();
+    size_t want = std::min(n, size_t(k) + std::min(tree->dead, size_t(k)));
+    std::vector<std::pair<uint32_t, float>> hits;
+    while (true) {
+      hits = tree->index->nearest(query, int(want));
+      size_t live = 0;
+      for (const auto& hit : hits) live += alive(*tree, hit.first) ? 1 : 0;
+      if (live >= size_t(k) || want >= n) break;
+      want = std::min(n, 4 * want);
+    }
+    size_t taken = 0;
+    for (const auto& [i, similarity] : hits) {
+      if (!alive(*tree, i) || taken == size_t(k)) continue;
+      ++taken;
+      float d2 = 0.0f;
+      for (size_t c = 0; c < query.size(); ++c) {
+        const float e = query[c] - tree->descriptors[i][c];
+        d2 += e * e;
+      }
+      found.emplace_back(d2, tree->owner[i], tree->sequence[i], similarity);
+    }
+  }
+  std::sort(found.begin(), found.end());
+  if (found.size() > size_t(k)) found.resize(size_t(k));
+  std::vector<Neighbour> out;
+  out.reserve(found.size());
+  for (const auto& [d2, owner, sequence, similarity] : found) out.push_back({owner, similarity});
+  return out;
+}
+
+}  // namespace objdb::database

@@ -1,0 +1,127 @@
+#include "core/database/prefilter_index.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+#include <tuple>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace objdb::database {
+namespace {
+
+std::vector<model::Fpfh> randomDescriptors(std::mt19937* rng, size_t n) {
+  std::uniform_real_distribution<float> u(0.0f, 100.0f);
+  std::vector<model::Fpfh> out(n);
+  for (auto& d : out) {
+    for (float& x : d) x = u(*rng);
+  }
+  return out;
+}
+
+// The exact answer: every live descriptor, by distance, then owner, then put order.
+struct Reference {
+  struct Entry {
+    int64_t owner;
+    uint64_t sequence;
+    model::Fpfh d;
+  };
+  std::map<int64_t, std::vector<Entry>> live;
+  uint64_t next = 0;
+  void put(int64_t id, const std::vector<model::Fpfh>& ds) {
+    live.erase(id);
+    for (const auto& d : ds) live[id].push_back({id, next++, d});
+  }
+  std::vector<int64_t> nearest(const model::Fpfh& q, int k) const {
+    std::vector<std::tuple<float, int64_t, uint64_t>> all;
+    for (const auto& [id, entries] : live) {
+      for (const auto& e : entries) {
+        float d2 = 0.0f;
+        for (size_t c = 0; c < q.size(); ++c) d2 += (q[c] - e.d[c]) * (q[c] - e.d[c]);
+        all.emplace_back(d2, e.owner, e.sequence);
+      }
+    }
+    std::sort(all.begin(), all.end());
+    std::vector<int64_t> out;
+    for (size_t i = 0; i < all.size() && int(i) < k; ++i) out.push_back(std::get<1>(all[i]));
+    return out;
+  }
+};
+
+std::vector<int64_t> owners(const std::vector<PrefilterIndex::Neighbour>& found) {
+  std::vector<int64_t> out;
+  for (const auto& n : found) out.push_back(n.owner);
+  return out;
+}
+
+TEST(PrefilterIndex, AnswersAsOneTreeOverTheLiveDescriptorsThroughPutsReplacementsAndErasures) {
+  std::mt19937 rng(7);
+  PrefilterIndex index;
+  Reference reference;
+  std::uniform_int_distribution<int64_t> pick(1, 40);
+  std::uniform_int_distribution<int> op(0, 9), size(0, 30);
+  for (int step = 0; step < 400; ++step) {
+    const int64_t id = pick(rng);
+    if (op(rng) < 7) {
+      const auto ds = randomDescriptors(&rng, size_t(size(rng)));
+      index.put(id, ds);
+      reference.put(id, ds);
+    } else {
+      index.erase(id);
+      reference.live.erase(id);
+    }
+    size_t live = 0;
+    for (const auto& [owner, entries] : reference.live) live += entries.size();
+    ASSERT_EQ(index.size(), live) << "step " << step;
+    if (step % 10 != 0) continue;
+    for (const auto& q : randomDescriptors(&rng, 5)) {
+      for (const int k : {1, 8, 64}) {
+        ASSERT_EQ(owners(index.nearest(q, k)), reference.nearest(q, k))
+            << "step " << step << ", k " << k;
+      }
+    }
+  }
+}
+
+TEST(PrefilterIndex, BuildsEachDescriptorLogarithmicallyOftenNotOncePerInsert) {
+  std::mt19937 rng(11);
+  PrefilterIndex index;
+  const size_t models = 512, per_model = 20;
+  for (size_t i = 0; i < models; ++i) index.put(int64_t(i + 1), randomDescriptors(&rng, per_model));
+  const size_t total = models * per_model;
+  EXPECT_EQ(index.size(), total);
+  // A full rebuild per insert builds 1 + 2 + … + 512 models' worth (2.6 M descriptors); the
+  // binary counter builds each descriptor at most log2(512) + 1 = 10 times.
+  EXPECT_LE(index.rebuilt(), total * 10);
+  EXPECT_LE(index.trees(), size_t(10));
+  // Erasing most models shrinks what is kept: half-dead trees are rebuilt or dropped.
+  for (size_t i = 0; i < models; i += 1) {
+    if (i % 8 != 0) index.erase(int64_t(i + 1));
+  }
+  EXPECT_EQ(index.size(), (models / 8) * per_model);
+  const auto found = index.nearest(randomDescriptors(&rng, 1)[0], 2000);
+  EXPECT_EQ(found.size(), (models / 8) * per_model);
+  for (const auto& n : found) EXPECT_EQ((n.owner - 1) % 8, 0);
+}
+
+TEST(PrefilterIndex, LoadedModelsAreFoundAndReplacedLikePutOnes) {
+  std::mt19937 rng(3);
+  const auto a = randomDescriptors(&rng, 10), b = randomDescriptors(&rng, 10);
+  PrefilterIndex index;
+  index.load({{1, &a}, {2, &b}});
+  EXPECT_EQ(index.size(), 20u);
+  EXPECT_EQ(index.nearest(a[3], 1).at(0).owner, 1);
+  EXPECT_FLOAT_EQ(index.nearest(a[3], 1).at(0).similarity, 1.0f);
+  index.put(1, b);  // model 1 now holds b's descriptors: ties go to the lower owner
+  EXPECT_EQ(index.size(), 20u);
+  EXPECT_EQ(owners(index.nearest(b[0], 2)), (std::vector<int64_t>{1, 2}));
+  index.erase(2);
+  index.erase(1);
+  EXPECT_EQ(index.size(), 0u);
+  EXPECT_TRUE(index.nearest(a[0], 5).empty());
+}
+
+}  // namespace
+}  // namespace objdb::database
