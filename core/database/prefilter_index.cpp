@@ -21,14 +21,17 @@ std::unique_ptr<PrefilterIndex::Tree> PrefilterIndex::rebuild(
       out->sequence.push_back(t->sequence[i]);
     }
   }
-  for (size_t i = 0; i < out->owner.size(); ++i) where_[out->owner[i]].tree = out.get();
+  // A model's descriptors are contiguous in every tree (put together, kept in order).
+  for (size_t i = 0; i < out->owner.size(); ++i) {
+    if (i == 0 || out->owner[i] != out->owner[i - 1]) where_[out->owner[i]].tree = out.get();
+  }
   if (out->descriptors.empty()) return nullptr;
   out->index = std::make_unique<matching::DescriptorIndex>(out->descriptors);
   rebuilt_ += out->descriptors.size();
   return out;
 }
 
-void PrefilterIndex::kill(int64_t id) {
+void PrefilterIndex::erase(int64_t id) {
   const auto it = where_.find(id);
   if (it == where_.end()) return;
   Tree* tree = it->second.tree;
@@ -52,7 +55,7 @@ void PrefilterIndex::load(
     const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models) {
   auto tree = std::make_unique<Tree>();
   for (const auto& [id, descriptors] : models) {
-    kill(id);
+    erase(id);
     if (descriptors->empty()) continue;
     where_[id] = Place{tree.get(), next_sequence_, descriptors->size()};
     for (const auto& d : *descriptors) {
@@ -69,7 +72,7 @@ void PrefilterIndex::load(
 }
 
 void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors) {
-  kill(id);
+  erase(id);
   if (descriptors.empty()) return;
   auto tree = std::make_unique<Tree>();
   tree->descriptors = descriptors;
@@ -92,8 +95,6 @@ void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors
     if (merged) trees_.push_back(std::move(merged));
   }
 }
-
-void PrefilterIndex::erase(int64_t id) { kill(id); }
 
 std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh& query,
                                                                int k) const {

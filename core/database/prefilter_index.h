@@ -30,7 +30,8 @@ class PrefilterIndex {
   void load(const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models);
   // Adds model `id`'s descriptors, replacing those it had.
   void put(int64_t id, const std::vector<model::Fpfh>& descriptors);
-  // Takes model `id`'s descriptors out (nothing when it has none here).
+  // Takes model `id`'s descriptors out (nothing when it has none here): they stay as tombstones
+  // until half their tree is dead, which is then rebuilt (or dropped when nothing is left).
   void erase(int64_t id);
   // The k nearest live descriptors to `query` (Euclidean, as the kd-trees search), nearest first
   // (ties: lower owner, then the older descriptor), with their similarity to it.
@@ -54,8 +55,6 @@ class PrefilterIndex {
   // Rebuilds `trees` into one tree of their live descriptors (null when none is left).
   std::unique_ptr<Tree> rebuild(std::vector<std::unique_ptr<Tree>> trees);
   bool alive(const Tree& tree, size_t i) const;
-  // Marks model `id`'s descriptors dead; rebuilds or drops its tree when half of it is dead.
-  void kill(int64_t id);
 
   std::vector<std::unique_ptr<Tree>> trees_;  // oldest (largest) first
   struct Place {

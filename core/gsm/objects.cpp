@@ -275,9 +275,12 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
   // object whose footprint holds most of it (at least half) join that object, as the part nearest
   // the plane.
   if (!floating.empty()) {
-    // Each floating object's lowest voxel above the plane and the member label holding it.
-    absl::flat_hash_map<Label, std::pair<float, Label>> lowest;
-    for (const Label object : floating) {
+    // A floating object's lowest voxel above the plane and the member label holding it, computed
+    // when an island first asks.
+    absl::flat_hash_map<Label, std::pair<float, Label>> lowest_of;
+    const auto lowest = [&](Label object) -> const std::pair<float, Label>& {
+      auto it = lowest_of.find(object);
+      if (it != lowest_of.end()) return it->second;
       std::pair<float, Label> low{1e30f, 0};
       for (const Label l : out->members.at(object)) {
         for (const auto& v : voxels_of.at(l)) {
@@ -285,8 +288,8 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
           if (h < low.first) low = {h, l};
         }
       }
-      lowest.emplace(object, low);
-    }
+      return lowest_of.emplace(object, low).first->second;
+    };
     absl::flat_hash_set<uint64_t> seen;
     for (const auto& start : candidates) {
       if (part_of.contains(packGridKey(start)) || !seen.insert(packGridKey(start)).second) continue;
@@ -303,7 +306,7 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
       Label best = 0;
       size_t best_inside = 0;
       for (const Label object : floating) {
-        if (lowest.at(object).first <= max_height) continue;  // not above the band
+        if (lowest(object).first <= max_height) continue;  // not above the band
         size_t n = 0;
         for (const auto& v : island) n += inside(object, v) ? 1 : 0;
         if (2 * n >= island.size() && n > best_inside) {
@@ -312,7 +315,7 @@ void annexFrom(Label structure, const Shape& plane, const std::vector<tsdf::Voxe
         }
       }
       if (best == 0) continue;
-      const Label part = lowest.at(best).second;
+      const Label part = lowest(best).second;
       for (const auto& v : island) {
         if (!inside(best, v)) continue;  // the footprint bounds what an object takes
         part_of.emplace(packGridKey(v), part);
