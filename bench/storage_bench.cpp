@@ -1,4 +1,5 @@
-// storage_bench: throughput of the SQLite object store (issue 6) on realistic models — a
+// storage_bench: throughput of the object store (SQLite, issue 6; PostgreSQL, issue 20) on
+// realistic models — a
 // chair-sized TSDF at 1 cm (seat, back, four legs; observed band ±3 voxels), its surface cloud,
 // ISS ∪ Harris3D keypoints and FPFH descriptors built by core/model exactly as the database does.
 // Prints insert and load throughput (models/s, MB/s of blobs), the time to open a database of N
@@ -7,6 +8,7 @@
 // its query against one tree's), and the file size. Not a test: figures vary with the machine.
 //
 //   build/bin/storage_bench [--models 1000] [--dir /tmp] [--synchronous FULL|NORMAL]
+//   build/bin/storage_bench --db postgresql://USER@HOST/EMPTY_DB [--models 1000]
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -24,7 +26,7 @@
 #include "core/model/features.h"
 #include "core/model/object_model.h"
 #include "storage/blob_codec.h"
-#include "storage/sqlite/sqlite_store.h"
+#include "storage/open_store.h"
 
 namespace objdb {
 namespace {
@@ -63,7 +65,7 @@ size_t blobBytes(const model::ObjectModel& m) {
 int main(int argc, char** argv) {
   using namespace objdb;
   int models = 1000;
-  std::string dir = "/tmp", synchronous = "FULL";
+  std::string dir = "/tmp", synchronous = "FULL", db;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string name = argv[i];
     if (name == "--models") {
@@ -72,8 +74,11 @@ int main(int argc, char** argv) {
       dir = argv[i + 1];
     } else if (name == "--synchronous") {
       synchronous = argv[i + 1];
+    } else if (name == "--db") {
+      db = argv[i + 1];
     } else {
-      std::fprintf(stderr, "usage: storage_bench [--models N] [--dir DIR] [--synchronous FULL|NORMAL]\n");
+      std::fprintf(stderr, "usage: storage_bench [--models N] [--dir DIR] [--synchronous FULL|NORMAL] "
+                   "[--db SQLITE_FILE|POSTGRES_URI]\n");
       return 2;
     }
   }
@@ -95,13 +100,23 @@ int main(int argc, char** argv) {
               double(storage::encodePointCloud(chair.cloud).size()) / 1e3,
               double(storage::encodeDescriptors(chair.descriptors).size()) / 1e3);
 
-  const std::string path = (std::filesystem::path(dir) / "objdb_storage_bench.sqlite").string();
-  for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path + suffix);
-  storage::SqliteStoreOptions options;
-  options.synchronous = synchronous;
-  auto store = storage::SqliteStore::open(path, options);
+  // A file of our own (removed first), or the database the caller names, which must be empty.
+  const bool own_file = db.empty();
+  const std::string path =
+      own_file ? (std::filesystem::path(dir) / "objdb_storage_bench.sqlite").string() : db;
+  if (own_file) {
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path + suffix);
+  }
+  storage::StoreOptions options;
+  options.sqlite.synchronous = synchronous;
+  auto store = storage::openStore(path, options);
   if (!store.ok()) {
     std::fprintf(stderr, "storage_bench: %s\n", std::string(store.status().message()).c_str());
+    return 1;
+  }
+  if (!(*store)->modelIds().value().empty()) {
+    std::fprintf(stderr, "storage_bench: %s holds models already; give it an empty database\n",
+                 (*store)->describe().c_str());
     return 1;
   }
   double bytes = 0;
@@ -129,7 +144,7 @@ int main(int argc, char** argv) {
   store->reset();
 
   t = Clock::now();
-  auto reopened = storage::SqliteStore::open(path, options);
+  auto reopened = storage::openStore(path, options);
   const double open_s = secondsSince(t);
   if (!reopened.ok()) {
     std::fprintf(stderr, "storage_bench: %s\n", std::string(reopened.status().message()).c_str());
@@ -177,14 +192,17 @@ int main(int argc, char** argv) {
   for (const auto& d : query) (void)prefilter.nearest(d, k);
   const double query_prefilter_ms = 1000.0 * secondsSince(t);
 
-  std::printf("\n%d models, synchronous=%s, file %.1f MB\n", models, synchronous.c_str(),
+  std::printf("\n%d models in %s, %s, %.1f MB\n", models, (*reopened)->describe().c_str(),
+              own_file || !storage::isPostgresTarget(path)
+                  ? absl::StrFormat("synchronous=%s", synchronous).c_str()
+                  : "PostgreSQL",
               double(stats.file_bytes) / 1e6);
   std::printf("%-44s %10s %10s %10s\n", "", "seconds", "models/s", "MB/s");
   std::printf("%-44s %10.2f %10.1f %10.1f\n", "insert (one transaction each, encode incl.)",
               insert_s, models / insert_s, bytes / 1e6 / insert_s);
   std::printf("%-44s %10.2f %10.1f %10.1f\n", "load every model (decode incl.)", load_s,
               models / load_s, bytes / 1e6 / load_s);
-  std::printf("%-44s %10.3f\n", "open (quick_check, schema check)", open_s);
+  std::printf("%-44s %10.3f\n", "open (schema check; SQLite: quick_check)", open_s);
   std::printf("%-44s %10.3f   (%zu descriptors)\n", "matcher index: read descriptors", entries_s,
               all.size());
   std::printf("%-44s %10.3f\n", "matcher index: build the kd-tree", index_s);

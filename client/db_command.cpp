@@ -18,6 +18,8 @@
 #include "core/completion/scene_completion.h"
 #include "core/io/mesh_io.h"
 #include "core/tsdf/mesh_extraction.h"
+#include "storage/open_store.h"
+#include "storage/postgres/postgres_store.h"
 #include "storage/sqlite/sqlite_store.h"
 
 namespace objdb {
@@ -30,9 +32,12 @@ constexpr const char* kUsage = R"(usage: objdb db check  --db FILE
        objdb db complete --db FILE --session NAME --out FILE.ply [--config FILE] [--min-weight W]
        objdb db backup --db FILE --out NEW_FILE
 
-Administration of an objdb database file (opened read-only; nothing is written to it).
+Administration of an objdb database: an SQLite file (opened read-only; nothing is written to
+it) or a PostgreSQL database named by a libpq URI (postgresql://USER@HOST/DB; credentials from
+~/.pgpass or PGPASSWORD, TLS as its sslmode asks; docs/storage.md).
 
-  check    SQLite's integrity_check and foreign-key check, then every blob's checksum and
+  check    SQLite's integrity_check and foreign-key check (PostgreSQL: observations whose raw
+           segment row names another segment), then every blob's checksum and
            structure; lists each finding (table, row, column, problem); exit status 1 on any
   stats    schema version, file size, rows and blob bytes per table, models by state, sessions
   models   one line per active model: id, observations, points, keypoints, planar, sessions
@@ -49,29 +54,30 @@ Administration of an objdb database file (opened read-only; nothing is written t
   backup   a consistent copy of the database in a new file (SQLite's backup API, one read
            snapshot), also while objdb-server writes to it; the copy appears whole under its name
            or not at all, never over an existing file, and is checked like `check` does; exit
-           status 1 if anything fails
+           status 1 if anything fails. PostgreSQL: a pg_dump archive (custom format, one
+           snapshot; restore with pg_restore into an empty database), pg_dump must be installed
 )";
 
 constexpr const char* kCommand = "db";
 
-int check(const storage::SqliteStore& store) {
+int check(const storage::Store& store) {
   const auto report = store.check();
   if (!report.ok()) return cli::reportError(kCommand, report.status());
-  for (const auto& line : report->sqlite_findings) std::printf("sqlite: %s\n", line.c_str());
+  for (const auto& line : report->engine_findings) std::printf("engine: %s\n", line.c_str());
   for (const auto& d : report->damaged) {
     std::printf("damaged: %s row %lld, column %s: %s\n", d.table.c_str(), (long long)d.row,
                 d.column.c_str(), d.problem.c_str());
   }
-  std::printf("%s: %zu blobs checked, %zu damaged, %zu SQLite findings: %s\n", store.path().c_str(),
-              report->blobs_checked, report->damaged.size(), report->sqlite_findings.size(),
-              report->ok() ? "ok" : "NOT OK");
+  std::printf("%s: %zu blobs checked, %zu damaged, %zu engine findings: %s\n",
+              store.describe().c_str(), report->blobs_checked, report->damaged.size(),
+              report->engine_findings.size(), report->ok() ? "ok" : "NOT OK");
   return report->ok() ? 0 : 1;
 }
 
-int stats(const storage::SqliteStore& store) {
+int stats(const storage::Store& store) {
   const auto s = store.stats();
   if (!s.ok()) return cli::reportError(kCommand, s.status());
-  std::printf("%s: schema %d, %.2f MB (without the WAL)\n", store.path().c_str(), s->schema_version,
+  std::printf("%s: schema %d, %.2f MB (without the WAL)\n", store.describe().c_str(), s->schema_version,
               double(s->file_bytes) / 1e6);
   std::printf("models: %lld active, %lld removed, %lld merged into others\n",
               (long long)s->active_models, (long long)s->removed_models,
@@ -92,7 +98,7 @@ int stats(const storage::SqliteStore& store) {
   return 0;
 }
 
-int models(const storage::SqliteStore& store) {
+int models(const storage::Store& store) {
   const auto ids = store.modelIds();
   if (!ids.ok()) return cli::reportError(kCommand, ids.status());
   std::printf("%6s %6s %8s %9s %6s  %s\n", "id", "poses", "points", "keypoints", "planar",
@@ -116,7 +122,7 @@ int models(const storage::SqliteStore& store) {
   return failures == 0 ? 0 : 1;
 }
 
-int exportModel(const storage::SqliteStore& store, long long id, const std::string& out,
+int exportModel(const storage::Store& store, long long id, const std::string& out,
                 const std::string& what, float min_weight) {
   const auto m = store.model(id);
   if (!m.ok()) return cli::reportError(kCommand, m.status());
@@ -139,7 +145,7 @@ int exportModel(const storage::SqliteStore& store, long long id, const std::stri
 // The parameters a session was processed with (the defaults where the stored text is not a JSON
 // object, as in files written before sessions recorded them), then `config` on top. Stored
 // parameters that do not apply (an unknown key, a bad value) are an error, never ignored.
-StatusOr<Params> sessionParams(const storage::SqliteStore& store, const std::string& session,
+StatusOr<Params> sessionParams(const storage::Store& store, const std::string& session,
                                const std::string& config, std::string* origin) {
   OBJDB_ASSIGN_OR_RETURN(const auto sessions, store.sessions());
   Params params;
@@ -158,7 +164,7 @@ StatusOr<Params> sessionParams(const storage::SqliteStore& store, const std::str
     *origin = "the session's stored parameters";
   }
   if (!known) {
-    return absl::NotFoundError(absl::StrFormat("no session %s in %s", session, store.path()));
+    return absl::NotFoundError(absl::StrFormat("no session %s in %s", session, store.describe()));
   }
   if (!config.empty()) {
     std::ifstream in(config, std::ios::binary);
@@ -176,7 +182,7 @@ StatusOr<Params> sessionParams(const storage::SqliteStore& store, const std::str
   return params;
 }
 
-int complete(const storage::SqliteStore& store, const std::string& session, const std::string& out,
+int complete(const storage::Store& store, const std::string& session, const std::string& out,
              const std::string& config, double min_weight) {
   std::string origin;
   auto params = sessionParams(store, session, config, &origin);
@@ -214,14 +220,16 @@ int complete(const storage::SqliteStore& store, const std::string& session, cons
   return 0;
 }
 
-int backup(const storage::SqliteStore& store, const std::string& out) {
+int backup(const storage::Store& store, const std::string& out) {
   const auto start = std::chrono::steady_clock::now();
   const auto report = store.backupTo(out);
   if (!report.ok()) return cli::reportError(kCommand, report.status());
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  std::printf("%s: backed up to %s, %lld pages (%.2f MB) in %.2f s\n", store.path().c_str(),
+  std::printf("%s: backed up to %s, %lld pages (%.2f MB) in %.2f s\n", store.describe().c_str(),
               out.c_str(), (long long)report->pages, double(report->bytes) / 1e6, seconds);
+  // A PostgreSQL backup is a pg_dump archive (pg_restore reads it), not a store to check.
+  if (storage::isPostgresTarget(store.describe())) return 0;
   storage::SqliteStoreOptions options;
   options.read_only = true;
   options.create_if_missing = false;
@@ -294,12 +302,13 @@ int runDbCommand(int argc, char** argv) {
   if (action == "backup" && out.empty()) {
     return cli::usageError(kCommand, "backup needs --out NEW_FILE", kUsage);
   }
-  storage::SqliteStoreOptions options;
-  options.read_only = true;
-  options.create_if_missing = false;
+  storage::StoreOptions options;
+  options.sqlite.read_only = true;
+  options.sqlite.create_if_missing = false;
   // check runs the full integrity check itself and lists what it finds.
-  options.quick_check_on_open = action != "check";
-  const auto store = storage::SqliteStore::open(db, options);
+  options.sqlite.quick_check_on_open = action != "check";
+  options.postgres.pool_size = 1;
+  const auto store = storage::openStore(db, options);
   if (!store.ok()) return cli::reportError(kCommand, store.status());
   if (action == "check") return check(**store);
   if (action == "stats") return stats(**store);

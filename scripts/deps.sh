@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Debian packages objdb needs, skipping the ones already present.
-# Extra packages may be given as arguments (scripts/peer_bench.sh: libopen3d-dev).
+# Extra packages may be given as arguments (scripts/peer_bench.sh: libopen3d-dev). postgresql is
+# the server the PostgreSQL tests start their own throwaway cluster with (scripts/pg_test_cluster.sh).
 # Safe to run repeatedly; a second run with everything installed takes well under a second.
 set -euo pipefail
 
@@ -9,6 +10,7 @@ PACKAGES=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libabsl-dev
   libpcl-dev libopencv-dev libeigen3-dev
   libsqlite3-dev libzstd-dev zlib1g-dev
+  postgresql libpq-dev
   libspdlog-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   openssl

@@ -38,9 +38,12 @@ options:
   --allow-remote          accept a non-loopback --listen address (such as 0.0.0.0:50051)
                           without TLS + token or client certificates. Without them anyone who
                           can reach the port can read and write the database.
-  --db PATH               SQLite database file, created if missing (default %s); a corrupt
-                          file, another application's database or a newer schema refuses the
-                          start, and the file is left untouched
+  --db PATH|URI           SQLite database file, created if missing (default %s), or a
+                          PostgreSQL database as a libpq URI (postgresql://USER@HOST/DB;
+                          password from ~/.pgpass or PGPASSWORD, TLS per sslmode; one objdb
+                          server per database for now; docs/storage.md); a corrupt file, an
+                          unreachable server, another application's database or a newer
+                          schema refuses the start, and the database is left untouched
   --config FILE           pipeline parameters as JSON, e.g. {"tsdf": {"voxel_size_m": 0.01}};
                           checked at startup: unknown keys and bad values refuse the start
   --print-config          print the effective parameters (defaults + --config) as JSON, exit

@@ -82,7 +82,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   OBJDB_ASSIGN_OR_RETURN(const ListenAddress address, parseListenAddress(options.listen_address));
   // The database first: a file that cannot be served stops the start before anything listens.
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<storage::Store> store,
-                         storage::openStore(options.db_path, storage::SqliteStoreOptions{}));
+                         storage::openStore(options.db_path));
 
   server::ServiceOptions service_options;
   if (!options.token_file.empty()) {

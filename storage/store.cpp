@@ -13,6 +13,12 @@ const char* sessionStateName(SessionState state) {
   return "open";
 }
 
+SessionState sessionStateFromName(std::string_view name) {
+  if (name == "ended") return SessionState::kEnded;
+  if (name == "interrupted") return SessionState::kInterrupted;
+  return SessionState::kOpen;
+}
+
 std::string intrinsicsJson(const Intrinsics& intrinsics) {
   return nlohmann::json{{"width", intrinsics.width}, {"height", intrinsics.height},
                         {"fx", intrinsics.fx},       {"fy", intrinsics.fy},

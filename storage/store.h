@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/common/intrinsics.h"
@@ -19,6 +20,8 @@ namespace objdb::storage {
 
 enum class SessionState { kOpen, kEnded, kInterrupted };
 const char* sessionStateName(SessionState state);
+// The state of a stored name (anything unknown reads as open).
+SessionState sessionStateFromName(std::string_view name);
 
 // SessionInfo::intrinsics_json of `intrinsics`: {"width", "height", "fx", "fy", "cx", "cy"}.
 std::string intrinsicsJson(const Intrinsics& intrinsics);
@@ -52,10 +55,10 @@ struct Damage {
 struct CheckReport {
   // The database engine's own integrity findings (SQLite: PRAGMA integrity_check lines other
   // than "ok", and foreign key violations).
-  std::vector<std::string> sqlite_findings;
+  std::vector<std::string> engine_findings;
   std::vector<Damage> damaged;              // blobs failing their checks
   size_t blobs_checked = 0;
-  bool ok() const { return sqlite_findings.empty() && damaged.empty(); }
+  bool ok() const { return engine_findings.empty() && damaged.empty(); }
 };
 
 struct TableStats {

@@ -13,6 +13,7 @@
 
 #include "absl/strings/str_format.h"
 #include "storage/sqlite/sqlite_store.h"
+#include "storage/row_codec.h"
 #include "storage/sqlite/sqlite_store_internal.h"
 
 namespace objdb::storage {
@@ -31,40 +32,18 @@ StatusOr<CheckReport> SqliteStore::check() const {
       OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
       if (!row) break;
       const std::string line = s.columnText(0);
-      if (line != "ok") report.sqlite_findings.push_back(line);
+      if (line != "ok") report.engine_findings.push_back(line);
     }
     OBJDB_ASSIGN_OR_RETURN(Statement fk, Statement::prepare(*lease, "PRAGMA foreign_key_check"));
     while (true) {
       OBJDB_ASSIGN_OR_RETURN(const bool row, fk.step());
       if (!row) break;
-      report.sqlite_findings.push_back(absl::StrFormat(
+      report.engine_findings.push_back(absl::StrFormat(
           "foreign key: %s row %d refers to a missing %s row", fk.columnText(0), fk.columnInt(1),
           fk.columnText(2)));
     }
   }
-  using Decoder = std::function<Status(std::string_view)>;
-  struct Column {
-    const char* table;
-    const char* column;
-    Decoder decode;
-  };
-  const std::vector<Column> columns = {
-      {"models", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
-      {"models", "surface_voxels", [](auto b) { return decodeVoxelList(b).status(); }},
-      {"models", "cloud", [](auto b) { return decodePointCloud(b).status(); }},
-      {"models", "keypoints", [](auto b) { return decodeIndices(b).status(); }},
-      {"models", "descriptors", [](auto b) { return decodeDescriptors(b).status(); }},
-      {"observations", "T_world_object", [](auto b) { return decodeTransform(b).status(); }},
-      {"observations", "T_object_segment", [](auto b) { return decodeTransform(b).status(); }},
-      {"raw_segments", "pose", [](auto b) { return decodeTransform(b).status(); }},
-      {"raw_segments", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
-      {"raw_segments", "voxels", [](auto b) { return decodeVoxelList(b).status(); }},
-      {"raw_segments", "voxel_parts", [](auto b) { return decodeIndices(b).status(); }},
-      {"merge_records", "transform", [](auto b) { return decodeTransform(b).status(); }},
-      {"scene_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
-      {"saved_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
-  };
-  for (const auto& c : columns) {
+  for (const BlobColumn& c : checkedBlobColumns()) {
     OBJDB_ASSIGN_OR_RETURN(
         Statement s,
         Statement::prepare(*lease, absl::StrFormat("SELECT rowid, %s FROM %s WHERE %s IS NOT NULL "
@@ -91,14 +70,7 @@ StatusOr<CheckReport> SqliteStore::check() const {
       OBJDB_ASSIGN_OR_RETURN(const bool row, blocks.step());
       if (!row) break;
       ++report.blobs_checked;
-      const int vps = int(blocks.columnInt(1));
-      if (!(vps >= 2 && vps <= 64)) {
-        report.damaged.push_back({tables->blocks, blocks.columnInt(0), "tsdf",
-                                  absl::StrFormat("map has %d voxels per side", vps)});
-        continue;
-      }
-      tsdf::TsdfBlock block(vps);
-      const Status status = decodeTsdfBlock(blocks.columnBlob(2), vps, &block);
+      const Status status = checkTsdfBlock(blocks.columnBlob(2), blocks.columnInt(1));
       if (!status.ok()) {
         report.damaged.push_back(
             {tables->blocks, blocks.columnInt(0), "tsdf", std::string(status.message())});
@@ -221,21 +193,8 @@ StatusOr<StoreStats> SqliteStore::stats() const {
   OBJDB_ASSIGN_OR_RETURN(const int64_t pages, (*lease).queryInt("PRAGMA page_count", "page_count"));
   OBJDB_ASSIGN_OR_RETURN(const int64_t page_size, (*lease).queryInt("PRAGMA page_size", "page_size"));
   stats.file_bytes = pages * page_size;
-  const std::vector<std::pair<const char*, const char*>> tables = {
-      {"sessions", "0"},
-      {"scene_blocks", "length(tsdf)"},
-      {"scene_label_blocks", "length(labels)"},
-      {"saved_blocks", "length(tsdf)"},
-      {"saved_label_blocks", "length(labels)"},
-      {"raw_segments", "length(pose) + length(grid) + length(voxels)"},
-      {"models",
-       "COALESCE(length(grid), 0) + COALESCE(length(surface_voxels), 0) + "
-       "COALESCE(length(cloud), 0) + COALESCE(length(keypoints), 0) + "
-       "COALESCE(length(descriptors), 0)"},
-      {"observations", "length(T_world_object) + length(T_object_segment)"},
-      {"merge_records", "length(transform)"},
-  };
-  for (const auto& [table, bytes] : tables) {
+
+  for (const auto& [table, bytes] : statsTables()) {
     OBJDB_ASSIGN_OR_RETURN(
         Statement s, Statement::prepare(*lease, absl::StrFormat(
                                                     "SELECT COUNT(*), COALESCE(SUM(%s), 0) FROM %s",

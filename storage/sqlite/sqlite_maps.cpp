@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_format.h"
 #include "storage/sqlite/sqlite_store.h"
+#include "storage/row_codec.h"
 #include "storage/sqlite/sqlite_store_internal.h"
 
 namespace objdb::storage {
@@ -15,56 +16,13 @@ using internal::kSavedTables;
 using internal::kSceneTables;
 using internal::MapTables;
 
-namespace {
-
-// The scene caches: lists of (session, value), most recently used first.
-template <typename Value>
-std::optional<Value> cacheGet(std::list<std::pair<std::string, Value>>* cache,
-                              const std::string& key) {
-  for (auto it = cache->begin(); it != cache->end(); ++it) {
-    if (it->first == key) {
-      cache->splice(cache->begin(), *cache, it);
-      return cache->front().second;
-    }
-  }
-  return std::nullopt;
-}
-
-template <typename Value>
-void cachePut(std::list<std::pair<std::string, Value>>* cache, const std::string& key,
-              Value value, size_t max_entries) {
-  cache->remove_if([&key](const auto& entry) { return entry.first == key; });
-  cache->emplace_front(key, std::move(value));
-  while (cache->size() > max_entries) cache->pop_back();
-}
-
-}  // namespace
-
 Status SqliteStore::writeMap(const MapTables& tables, const std::string& session,
                              const tsdf::TsdfLayer& scene, const gsm::LabelBlocks* labels,
                              int64_t frames) {
-  struct EncodedBlock {
-    tsdf::BlockIndex index;
-    std::string blob;
-  };
-  std::vector<EncodedBlock> blocks;
-  blocks.reserve(scene.numBlocks());
-  for (const auto& [index, block] : scene.blocks()) {
-    blocks.push_back({index, encodeTsdfBlock(*block, options_.blobs)});
-  }
-  std::vector<EncodedBlock> label_blocks;
-  if (labels != nullptr) {
-    const size_t voxels = size_t(scene.voxelsPerSide()) * scene.voxelsPerSide() *
-                          scene.voxelsPerSide();
-    for (const auto& [index, block] : *labels) {
-      if (block.size() != voxels) {
-        return absl::InvalidArgumentError(absl::StrFormat(
-            "%s of session %s: label block (%d, %d, %d) has %d labels, the grid's blocks %d",
-            tables.what, session, index.x(), index.y(), index.z(), block.size(), voxels));
-      }
-      label_blocks.push_back({index, encodeLabelBlock(block, options_.blobs)});
-    }
-  }
+  OBJDB_ASSIGN_OR_RETURN(
+      const EncodedMap encoded,
+      encodeMap(absl::StrFormat("%s of session %s", tables.what, session), scene, labels,
+                options_.blobs));
   std::lock_guard lock(write_mutex_);
   OBJDB_RETURN_IF_ERROR(requireWriter());
   OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
@@ -80,8 +38,8 @@ Status SqliteStore::writeMap(const MapTables& tables, const std::string& session
                                          "blocks = excluded.blocks, "
                                          "updated_at = excluded.updated_at",
                                          tables.maps, kNow)));
-  map.bind(1, sid).bind(2, double(scene.voxelSize())).bind(3, int64_t(scene.voxelsPerSide()));
-  OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(blocks.size())).run());
+  map.bind(1, sid).bind(2, encoded.voxel_size).bind(3, encoded.voxels_per_side);
+  OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(encoded.tsdf.size())).run());
   if (tables.has_frames) {
     OBJDB_ASSIGN_OR_RETURN(
         Statement count,
@@ -108,8 +66,8 @@ Status SqliteStore::writeMap(const MapTables& tables, const std::string& session
     }
     return absl::OkStatus();
   };
-  OBJDB_RETURN_IF_ERROR(replaceBlocks(tables.blocks, "tsdf", blocks));
-  OBJDB_RETURN_IF_ERROR(replaceBlocks(tables.label_blocks, "labels", label_blocks));
+  OBJDB_RETURN_IF_ERROR(replaceBlocks(tables.blocks, "tsdf", encoded.tsdf));
+  OBJDB_RETURN_IF_ERROR(replaceBlocks(tables.label_blocks, "labels", encoded.labels));
   return txn.commit();
 }
 
@@ -122,10 +80,8 @@ Status SqliteStore::putScene(const std::string& session,
   OBJDB_RETURN_IF_ERROR(annotate(writeMap(kSceneTables, session, *scene, labels.get(),
                                           /*frames=*/0),
                                  absl::StrFormat("storing the scene of session %s", session)));
-  std::lock_guard cache_lock(scene_mutex_);
-  const size_t max = size_t(options_.max_cached_scenes);
-  cachePut(&scene_cache_, session, std::move(scene), max);
-  cachePut(&label_cache_, session, std::move(labels), max);
+  scene_cache_.putScene(session, std::move(scene));
+  scene_cache_.putLabels(session, std::move(labels));
   return absl::OkStatus();
 }
 
@@ -161,19 +117,13 @@ StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::readMapLabels(
     OBJDB_ASSIGN_OR_RETURN(const bool row, b.step());
     if (!row) break;
     const tsdf::BlockIndex index(int(b.columnInt(1)), int(b.columnInt(2)), int(b.columnInt(3)));
-    auto decoded = decodeLabelBlock(b.columnBlob(4));
-    const int64_t vps = b.columnInt(5);
-    if (decoded.ok() && decoded->size() != size_t(vps * vps * vps)) {
-      decoded = absl::DataLossError(absl::StrFormat("%d labels, expected %d", decoded->size(),
-                                                    vps * vps * vps));
-    }
-    if (!decoded.ok()) {
-      return annotate(decoded.status(),
-                      absl::StrFormat("%s labels of session %s, block (%d, %d, %d) (%s row %d)",
-                                      tables.what, session, index.x(), index.y(), index.z(),
-                                      tables.label_blocks, b.columnInt(0)));
-    }
-    labels->emplace(index, std::move(*decoded));
+    OBJDB_ASSIGN_OR_RETURN(
+        std::vector<uint32_t> decoded,
+        decodeMapLabels(b.columnBlob(4), b.columnInt(5),
+                        absl::StrFormat("%s labels of session %s, block (%d, %d, %d) (%s row %d)",
+                                        tables.what, session, index.x(), index.y(), index.z(),
+                                        tables.label_blocks, b.columnInt(0))));
+    labels->emplace(index, std::move(decoded));
   }
   std::shared_ptr<const gsm::LabelBlocks> out;
   if (!labels->empty()) out = std::move(labels);
@@ -196,11 +146,9 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::readMapTsdf(
   const int64_t sid = m.columnInt(0);
   const int vps = int(m.columnInt(2));
   if (frames != nullptr) *frames = m.columnInt(3);
-  auto layer = tsdf::TsdfLayer::create(float(m.columnDouble(1)), vps);
-  if (!layer.ok()) {
-    return absl::DataLossError(absl::StrFormat("%s of session %s: %s", tables.what, session,
-                                               layer.status().message()));
-  }
+  auto layer = emptyMap(absl::StrFormat("%s of session %s", tables.what, session),
+                        m.columnDouble(1), vps);
+  if (!layer.ok()) return layer.status();
   OBJDB_ASSIGN_OR_RETURN(
       Statement b,
       Statement::prepare(connection, absl::StrFormat("SELECT rowid, bx, by, bz, tsdf FROM %s "
@@ -224,32 +172,24 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::readMapTsdf(
 
 StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::sceneLabels(
     const std::string& session) const {
-  {
-    std::lock_guard lock(scene_mutex_);
-    if (auto cached = cacheGet(&label_cache_, session)) return *cached;
-  }
+  if (auto cached = scene_cache_.labels(session)) return *cached;
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<const gsm::LabelBlocks> out,
                          readMapLabels(*lease, kSceneTables, session));
-  std::lock_guard lock(scene_mutex_);
-  cachePut(&label_cache_, session, out, size_t(options_.max_cached_scenes));
+  scene_cache_.putLabels(session, out);
   return out;
 }
 
 StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
     const std::string& session) const {
-  {
-    std::lock_guard lock(scene_mutex_);
-    if (auto cached = cacheGet(&scene_cache_, session)) return *cached;
-  }
+  if (auto cached = scene_cache_.scene(session)) return *cached;
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
   OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<const tsdf::TsdfLayer> shared,
                          readMapTsdf(*lease, kSceneTables, session, nullptr));
   OBJDB_RETURN_IF_ERROR(snapshot.commit());
   if (shared == nullptr) return shared;  // no scene stored (not cached: it may come)
-  std::lock_guard lock(scene_mutex_);
-  cachePut(&scene_cache_, session, shared, size_t(options_.max_cached_scenes));
+  scene_cache_.putScene(session, shared);
   return shared;
 }
 

@@ -9,68 +9,16 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "storage/sqlite/sqlite_store.h"
+#include "storage/row_codec.h"
 #include "storage/sqlite/sqlite_store_internal.h"
 
 namespace objdb::storage {
 
-using internal::inRow;
 using internal::kNow;
-using internal::parseParts;
-
-// A model's columns, encoded outside the write lock.
-struct EncodedModel {
-  bool planar = false;
-  bool structure = false;
-  double plane_inlier_ratio = 0;
-  int64_t num_points = 0, num_keypoints = 0;
-  double voxel_size = 0;
-  Eigen::Vector3f bbox_min = Eigen::Vector3f::Zero(), bbox_max = Eigen::Vector3f::Zero();
-  std::string grid, surface_voxels, cloud, keypoints, descriptors;
-  model::BuildTimings timings;
-  struct Obs {
-    std::string session;
-    int64_t label;
-    std::string T_world_object, T_object_segment;
-  };
-  std::vector<Obs> observations;
-};
 
 namespace {
 
-EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
-  EncodedModel e;
-  e.planar = m.planar;
-  e.structure = m.structure;
-  e.plane_inlier_ratio = m.plane_inlier_ratio;
-  e.num_points = int64_t(m.cloud.points.size());
-  e.num_keypoints = int64_t(m.keypoint_indices.size());
-  e.voxel_size = m.grid.voxelSize();
-  if (!m.cloud.points.empty()) {
-    e.bbox_min = e.bbox_max = m.cloud.points.front();
-    for (const auto& p : m.cloud.points) {
-      e.bbox_min = e.bbox_min.cwiseMin(p);
-      e.bbox_max = e.bbox_max.cwiseMax(p);
-    }
-  }
-  e.grid = encodeTsdfGrid(m.grid, options);
-  e.surface_voxels = encodeVoxelList(m.surface_voxels, options);
-  e.cloud = encodePointCloud(m.cloud, options);
-  e.keypoints = encodeIndices(m.keypoint_indices, options);
-  e.descriptors = encodeDescriptors(m.descriptors, options);
-  e.timings = m.timings;
-  for (const auto& o : m.observations) {
-    e.observations.push_back({o.session, int64_t(o.label), encodeTransform(o.T_world_object),
-                              encodeTransform(o.T_object_segment)});
-  }
-  return e;
-}
-
-// Binds the model columns in the order of kModelColumns to parameters 1..N.
-constexpr const char* kModelColumns =
-    "planar, plane_inlier_ratio, num_points, num_keypoints, voxel_size, bbox_min_x, bbox_min_y, "
-    "bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, grid, surface_voxels, cloud, keypoints, "
-    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms, structure";
-constexpr int kNumModelColumns = 21;
+// bindModel binds kModelColumns (row_codec.h) in their order to parameters 1..N.
 
 void bindModel(Statement* s, const EncodedModel& e) {
   s->bind(1, int64_t(e.planar)).bind(2, e.plane_inlier_ratio).bind(3, e.num_points);
@@ -260,37 +208,17 @@ StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t i
   s.bind(1, id);
   OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
   if (!row) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
-  const std::string where = absl::StrFormat("object model %d", id);
-  auto grid = decodeTsdfGrid(s.columnBlob(11));
-  if (!grid.ok()) return inRow(grid.status(), "models", id, "grid");
-  model::ObjectModel m(std::move(*grid));
-  m.id = id;
-  m.planar = s.columnInt(0) != 0;
-  m.plane_inlier_ratio = float(s.columnDouble(1));
-  auto voxels = decodeVoxelList(s.columnBlob(12));
-  if (!voxels.ok()) return inRow(voxels.status(), "models", id, "surface_voxels");
-  m.surface_voxels = std::move(*voxels);
-  auto cloud = decodePointCloud(s.columnBlob(13));
-  if (!cloud.ok()) return inRow(cloud.status(), "models", id, "cloud");
-  m.cloud = std::move(*cloud);
-  auto keypoints = decodeIndices(s.columnBlob(14));
-  if (!keypoints.ok()) return inRow(keypoints.status(), "models", id, "keypoints");
-  m.keypoint_indices = std::move(*keypoints);
-  auto descriptors = decodeDescriptors(s.columnBlob(15));
-  if (!descriptors.ok()) return inRow(descriptors.status(), "models", id, "descriptors");
-  m.descriptors = std::move(*descriptors);
-  m.timings = {s.columnDouble(16), s.columnDouble(17), s.columnDouble(18), s.columnDouble(19)};
-  m.structure = s.columnInt(20) != 0;
-  for (uint32_t k : m.keypoint_indices) {
-    if (k >= m.cloud.points.size()) {
-      return absl::DataLossError(absl::StrFormat(
-          "%s: keypoint index %d beyond its %d cloud points", where, k, m.cloud.points.size()));
-    }
-  }
-  if (m.descriptors.size() != m.keypoint_indices.size() && !m.descriptors.empty()) {
-    return absl::DataLossError(absl::StrFormat("%s: %d descriptors for %d keypoints", where,
-                                               m.descriptors.size(), m.keypoint_indices.size()));
-  }
+  ModelColumns columns;
+  columns.planar = s.columnInt(0) != 0;
+  columns.plane_inlier_ratio = s.columnDouble(1);
+  columns.grid = s.columnBlob(11);
+  columns.surface_voxels = s.columnBlob(12);
+  columns.cloud = s.columnBlob(13);
+  columns.keypoints = s.columnBlob(14);
+  columns.descriptors = s.columnBlob(15);
+  columns.timings = {s.columnDouble(16), s.columnDouble(17), s.columnDouble(18), s.columnDouble(19)};
+  columns.structure = s.columnInt(20) != 0;
+  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel m, decodeModel(id, columns));
   OBJDB_ASSIGN_OR_RETURN(
       Statement o,
       Statement::prepare(*lease,
@@ -301,15 +229,9 @@ StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t i
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool more, o.step());
     if (!more) break;
-    model::Observation obs;
-    obs.session = o.columnText(1);
-    obs.label = uint32_t(o.columnInt(2));
-    auto T_wo = decodeTransform(o.columnBlob(3));
-    if (!T_wo.ok()) return inRow(T_wo.status(), "observations", o.columnInt(0), "T_world_object");
-    auto T_os = decodeTransform(o.columnBlob(4));
-    if (!T_os.ok()) return inRow(T_os.status(), "observations", o.columnInt(0), "T_object_segment");
-    obs.T_world_object = *T_wo;
-    obs.T_object_segment = *T_os;
+    OBJDB_ASSIGN_OR_RETURN(model::Observation obs,
+                           decodeObservation({o.columnInt(0), o.columnText(1), o.columnInt(2),
+                                              o.columnBlob(3), o.columnBlob(4)}));
     m.observations.push_back(std::move(obs));
   }
   OBJDB_RETURN_IF_ERROR(snapshot.commit());

@@ -92,10 +92,7 @@ StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {
     info.params_json = s.columnText(3);
     info.started_at = s.columnText(4);
     info.ended_at = s.columnText(5);
-    const std::string state = s.columnText(6);
-    info.state = state == "ended"         ? SessionState::kEnded
-                 : state == "interrupted" ? SessionState::kInterrupted
-                                          : SessionState::kOpen;
+    info.state = sessionStateFromName(s.columnText(6));
     info.frames = s.columnInt(7);
     out.push_back(std::move(info));
   }

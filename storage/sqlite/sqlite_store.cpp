@@ -13,33 +13,12 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "core/common/logging.h"
+#include "storage/row_codec.h"
 #include "storage/sqlite/sqlite_store_internal.h"
 
 namespace objdb::storage {
-namespace internal {
 
-Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
-  return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
-}
-
-StatusOr<std::vector<uint32_t>> parseParts(const std::string& text) {
-  std::vector<uint32_t> parts;
-  if (text.empty()) return parts;
-  for (const absl::string_view item : absl::StrSplit(text, ',')) {
-    uint32_t label = 0;
-    if (!absl::SimpleAtoi(item, &label) || label == 0) {
-      return absl::DataLossError(absl::StrFormat("parts \"%s\" is not a list of GSM labels", text));
-    }
-    parts.push_back(label);
-  }
-  return parts;
-}
-
-}  // namespace internal
-
-using internal::inRow;
 using internal::kNow;
-using internal::parseParts;
 
 Status SqliteStoreOptions::validate() const {
   if (synchronous != "FULL" && synchronous != "NORMAL") {
@@ -65,7 +44,9 @@ Status SqliteStoreOptions::validate() const {
 }
 
 SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
-    : path_(std::move(path)), options_(std::move(options)) {}
+    : path_(std::move(path)),
+      options_(std::move(options)),
+      scene_cache_(size_t(options_.max_cached_scenes)) {}
 
 SqliteStore::~SqliteStore() = default;
 
@@ -157,20 +138,7 @@ Status SqliteStore::requireWriter() const {
 }
 
 Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
-  if (segment.grid == nullptr) {
-    return absl::InvalidArgumentError(absl::StrFormat("raw segment %s/%d has no grid",
-                                                      segment.key.session, segment.key.label));
-  }
-  const std::string pose = encodeTransform(segment.T_world_segment);
-  const std::string grid = encodeTsdfGrid(*segment.grid, options_.blobs);
-  if (!segment.voxel_parts.empty() && segment.voxel_parts.size() != segment.voxels.size()) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "raw segment %s/%d: %d voxel parts for %d voxels", segment.key.session, segment.key.label,
-        segment.voxel_parts.size(), segment.voxels.size()));
-  }
-  const std::string voxels = encodeVoxelList(segment.voxels, options_.blobs);
-  const std::string voxel_parts =
-      segment.voxel_parts.empty() ? std::string() : encodeIndices(segment.voxel_parts, options_.blobs);
+  OBJDB_ASSIGN_OR_RETURN(const EncodedRawSegment e, encodeRawSegment(segment, options_.blobs));
   std::lock_guard lock(write_mutex_);
   OBJDB_RETURN_IF_ERROR(requireWriter());
   const std::string context =
@@ -193,13 +161,13 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
                 "observation_depth_m = excluded.observation_depth_m, parts = excluded.parts, "
                 "voxel_parts = excluded.voxel_parts, extracted_at = excluded.extracted_at",
                 kNow)));
-    s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, pose).bindBlob(4, grid);
-    s.bindBlob(5, voxels).bind(6, segment.extraction_frame);
-    s.bind(7, double(segment.observation_depth_m)).bind(8, absl::StrJoin(segment.parts, ","));
-    if (segment.voxel_parts.empty()) {
-      s.bindNull(9);
+    s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, e.pose).bindBlob(4, e.grid);
+    s.bindBlob(5, e.voxels).bind(6, segment.extraction_frame);
+    s.bind(7, double(segment.observation_depth_m)).bind(8, e.parts);
+    if (e.voxel_parts) {
+      s.bindBlob(9, *e.voxel_parts);
     } else {
-      s.bindBlob(9, voxel_parts);
+      s.bindNull(9);
     }
     OBJDB_RETURN_IF_ERROR(s.run());
     return txn.commit();
@@ -222,34 +190,16 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
   if (!row) {
     return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
   }
-  const int64_t id = s.columnInt(0);
-  auto record = std::make_shared<database::RawSegmentRecord>();
-  record->key = key;
-  auto pose = decodeTransform(s.columnBlob(1));
-  if (!pose.ok()) return inRow(pose.status(), "raw_segments", id, "pose");
-  record->T_world_segment = *pose;
-  auto grid = decodeTsdfGrid(s.columnBlob(2));
-  if (!grid.ok()) return inRow(grid.status(), "raw_segments", id, "grid");
-  record->grid = std::make_shared<const tsdf::TsdfLayer>(std::move(*grid));
-  auto voxels = decodeVoxelList(s.columnBlob(3));
-  if (!voxels.ok()) return inRow(voxels.status(), "raw_segments", id, "voxels");
-  record->voxels = std::move(*voxels);
-  record->extraction_frame = s.columnInt(4);
-  record->observation_depth_m = float(s.columnDouble(5));
-  auto parts = parseParts(s.columnText(6));
-  if (!parts.ok()) return inRow(parts.status(), "raw_segments", id, "parts");
-  record->parts = std::move(*parts);
-  if (!s.columnIsNull(7)) {
-    auto voxel_parts = decodeIndices(s.columnBlob(7));
-    if (!voxel_parts.ok()) return inRow(voxel_parts.status(), "raw_segments", id, "voxel_parts");
-    if (voxel_parts->size() != record->voxels.size()) {
-      return inRow(absl::DataLossError(absl::StrFormat("%d voxel parts for %d voxels",
-                                                       voxel_parts->size(), record->voxels.size())),
-                   "raw_segments", id, "voxel_parts");
-    }
-    record->voxel_parts = std::move(*voxel_parts);
-  }
-  return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
+  RawSegmentColumns columns;
+  columns.row = s.columnInt(0);
+  columns.pose = s.columnBlob(1);
+  columns.grid = s.columnBlob(2);
+  columns.voxels = s.columnBlob(3);
+  columns.extraction_frame = s.columnInt(4);
+  columns.observation_depth_m = s.columnDouble(5);
+  columns.parts = s.columnText(6);
+  if (!s.columnIsNull(7)) columns.voxel_parts = s.columnBlob(7);
+  return decodeRawSegment(key, columns);
 }
 
 StatusOr<int64_t> SqliteStore::rawSegmentId(const database::SegmentKey& key) const {

@@ -9,7 +9,6 @@
 // file); schema.h holds the schema and its migrations, sqlite_util.h the thin SQLite C API layer.
 #pragma once
 
-#include <list>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -18,6 +17,7 @@
 
 #include "core/database/model_store.h"
 #include "storage/blob_codec.h"
+#include "storage/row_codec.h"
 #include "storage/sqlite/file_registration.h"
 #include "storage/sqlite/schema.h"
 #include "storage/sqlite/sqlite_util.h"
@@ -44,8 +44,6 @@ struct SqliteStoreOptions {
   BlobOptions blobs;              // compression of new blobs
   Status validate() const;
 };
-
-struct EncodedModel;  // a model's columns as blobs (sqlite_models.cpp)
 
 class SqliteStore : public Store {
  public:
@@ -144,11 +142,9 @@ class SqliteStore : public Store {
   std::optional<Connection> writer_;
   mutable std::mutex reader_mutex_;
   mutable std::vector<Connection> idle_readers_;
-  // Decoded scene maps (large; read by every model-to-scene check), replaced on putScene.
-  mutable std::mutex scene_mutex_;
-  // Most recently used first; at most options_.max_cached_scenes entries each.
-  mutable std::list<std::pair<std::string, std::shared_ptr<const tsdf::TsdfLayer>>> scene_cache_;
-  mutable std::list<std::pair<std::string, std::shared_ptr<const gsm::LabelBlocks>>> label_cache_;
+  // Decoded scene maps (large; read by every model-to-scene check), replaced on putScene; at most
+  // options_.max_cached_scenes sessions.
+  mutable SceneCache scene_cache_;
 };
 
 }  // namespace objdb::storage

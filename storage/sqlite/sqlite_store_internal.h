@@ -34,13 +34,6 @@ inline constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks",
 inline constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks",
                                         "saved_label_blocks", true};
 
-// Blob errors keep their code (DATA_LOSS) and gain the row they sit in.
-Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column);
-
-// raw_segments.parts: GSM labels, comma-separated ("" = none recorded: a segment stored before
-// schema 4). Anything else is damage.
-StatusOr<std::vector<uint32_t>> parseParts(const std::string& text);
-
 }  // namespace internal
 
 // A reader connection borrowed from the pool, given back when the lease ends.

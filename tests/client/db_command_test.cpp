@@ -46,7 +46,7 @@ TEST(DbCommand, ChecksDescribesAndExports) {
   writeDatabase(db);
   ProcessResult r = runProcess({kObjdb, "db", "check", "--db", db.string()});
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
-  EXPECT_NE(r.out.find("0 damaged, 0 SQLite findings: ok"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 damaged, 0 engine findings: ok"), std::string::npos) << r.out;
 
   r = runProcess({kObjdb, "db", "stats", "--db", db.string()});
   EXPECT_EQ(r.exit_code, 0) << r.err;
@@ -80,7 +80,7 @@ TEST(DbCommand, BacksUpIntoANewFileThatReadsTheSameAndNeverOverwrites) {
   ProcessResult r = runProcess({kObjdb, "db", "backup", "--db", db.string(), "--out", copy.string()});
   EXPECT_EQ(r.exit_code, 0) << r.out << r.err;
   EXPECT_NE(r.out.find("backed up to " + copy.string()), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("0 damaged, 0 SQLite findings: ok"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0 damaged, 0 engine findings: ok"), std::string::npos) << r.out;
   for (const auto& entry : fs::directory_iterator(dir.path())) {
     EXPECT_EQ(entry.path().string().find(".partial"), std::string::npos) << entry.path();
   }

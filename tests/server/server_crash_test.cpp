@@ -184,7 +184,7 @@ TEST(ObjdbServerCrash, KilledWhileStreamingLosesNothingItReported) {
 
   auto store = storage::SqliteStore::open(db).value();
   const storage::CheckReport report = store->check().value();
-  EXPECT_TRUE(report.ok()) << report.sqlite_findings.size() << " SQLite findings, "
+  EXPECT_TRUE(report.ok()) << report.engine_findings.size() << " SQLite findings, "
                            << report.damaged.size() << " damaged blobs";
   const std::vector<int64_t> ids = store->modelIds().value();
   for (int64_t id : ids) EXPECT_TRUE(store->model(id).ok()) << "model " << id;

@@ -126,7 +126,7 @@ TEST(SqliteStoreCrash, EveryReportedCommitSurvivesSigkill) {
     const auto report = (*store)->check();
     ASSERT_TRUE(report.ok()) << report.status();
     ASSERT_TRUE(report->ok()) << "trial " << trial << ": integrity findings "
-                              << report->sqlite_findings.size() << ", damaged blobs "
+                              << report->engine_findings.size() << ", damaged blobs "
                               << report->damaged.size();
     const auto ids = (*store)->modelIds().value();
     for (const auto& [id, observations] : committed) {

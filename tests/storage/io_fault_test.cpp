@@ -41,8 +41,8 @@ StatusOr<int64_t> add(SqliteStore* store, const model::ObjectModel& m) {
 void expectConsistent(const SqliteStore& store, const Present& present, size_t expected_models) {
   const auto report = store.check();
   ASSERT_TRUE(report.ok()) << report.status();
-  EXPECT_TRUE(report->ok()) << (report->sqlite_findings.empty() ? "blob damage"
-                                                                  : report->sqlite_findings[0]);
+  EXPECT_TRUE(report->ok()) << (report->engine_findings.empty() ? "blob damage"
+                                                                  : report->engine_findings[0]);
   const auto ids = store.modelIds();
   ASSERT_TRUE(ids.ok()) << ids.status();
   EXPECT_EQ(ids->size(), expected_models);

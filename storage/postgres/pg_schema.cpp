@@ -1,0 +1,255 @@
+#include "storage/postgres/pg_schema.h"
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "core/common/logging.h"
+
+namespace objdb::storage::pg {
+namespace {
+
+// Version 1: the data model of the SQLite store's schema 5 (storage/sqlite/schema.cpp), in
+// PostgreSQL's types. Binary columns are bytea blobs of storage/blob_codec.h. Ids come from
+// identity columns, never reused. Block rows have an id of their own, for messages.
+constexpr const char* kSchemaV1 = R"sql(
+CREATE TABLE objdb_meta (
+  key TEXT PRIMARY KEY,
+  value TEXT NOT NULL
+);
+CREATE TABLE sessions (
+  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+  name TEXT NOT NULL UNIQUE,
+  intrinsics TEXT NOT NULL DEFAULT '',
+  params TEXT NOT NULL DEFAULT '',
+  started_at TEXT NOT NULL,
+  ended_at TEXT,
+  state TEXT NOT NULL CHECK (state IN ('open', 'ended', 'interrupted')),
+  frames BIGINT NOT NULL DEFAULT 0
+);
+CREATE TABLE scene_maps (
+  session_id BIGINT PRIMARY KEY REFERENCES sessions(id),
+  voxel_size DOUBLE PRECISION NOT NULL,
+  voxels_per_side BIGINT NOT NULL,
+  blocks BIGINT NOT NULL,
+  updated_at TEXT NOT NULL
+);
+CREATE TABLE scene_blocks (
+  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
+  session_id BIGINT NOT NULL REFERENCES scene_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  tsdf BYTEA NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
+CREATE TABLE scene_label_blocks (
+  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
+  session_id BIGINT NOT NULL REFERENCES scene_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  labels BYTEA NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
+CREATE TABLE saved_maps (
+  session_id BIGINT PRIMARY KEY REFERENCES sessions(id),
+  voxel_size DOUBLE PRECISION NOT NULL,
+  voxels_per_side BIGINT NOT NULL,
+  blocks BIGINT NOT NULL,
+  frames BIGINT NOT NULL DEFAULT 0,
+  updated_at TEXT NOT NULL
+);
+CREATE TABLE saved_blocks (
+  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
+  session_id BIGINT NOT NULL REFERENCES saved_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  tsdf BYTEA NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
+CREATE TABLE saved_label_blocks (
+  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
+  session_id BIGINT NOT NULL REFERENCES saved_maps(session_id) ON DELETE CASCADE,
+  bx INTEGER NOT NULL,
+  by INTEGER NOT NULL,
+  bz INTEGER NOT NULL,
+  labels BYTEA NOT NULL,
+  PRIMARY KEY (session_id, bx, by, bz)
+);
+CREATE TABLE raw_segments (
+  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+  session_id BIGINT NOT NULL REFERENCES sessions(id),
+  label BIGINT NOT NULL,
+  pose BYTEA NOT NULL,
+  grid BYTEA NOT NULL,
+  voxels BYTEA NOT NULL,
+  extraction_frame BIGINT NOT NULL,
+  observation_depth_m DOUBLE PRECISION NOT NULL DEFAULT 0,
+  parts TEXT NOT NULL DEFAULT '',
+  voxel_parts BYTEA,
+  extracted_at TEXT NOT NULL,
+  UNIQUE (session_id, label)
+);
+CREATE TABLE models (
+  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+  state TEXT NOT NULL CHECK (state IN ('active', 'merged', 'removed')),
+  merged_into BIGINT REFERENCES models(id),
+  planar BOOLEAN NOT NULL,
+  structure BOOLEAN NOT NULL DEFAULT FALSE,
+  plane_inlier_ratio DOUBLE PRECISION NOT NULL,
+  num_points BIGINT NOT NULL,
+  num_keypoints BIGINT NOT NULL,
+  voxel_size DOUBLE PRECISION,
+  bbox_min_x DOUBLE PRECISION, bbox_min_y DOUBLE PRECISION, bbox_min_z DOUBLE PRECISION,
+  bbox_max_x DOUBLE PRECISION, bbox_max_y DOUBLE PRECISION, bbox_max_z DOUBLE PRECISION,
+  grid BYTEA,
+  surface_voxels BYTEA,
+  cloud BYTEA,
+  keypoints BYTEA,
+  descriptors BYTEA,
+  cloud_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
+  planarity_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
+  keypoints_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
+  descriptors_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
+  created_at TEXT NOT NULL,
+  updated_at TEXT NOT NULL
+);
+CREATE INDEX models_by_state ON models(state);
+CREATE TABLE observations (
+  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
+  model_id BIGINT NOT NULL REFERENCES models(id),
+  seq BIGINT NOT NULL,
+  session_id BIGINT NOT NULL REFERENCES sessions(id),
+  label BIGINT NOT NULL,
+  raw_segment_id BIGINT REFERENCES raw_segments(id),
+  t_world_object BYTEA NOT NULL,
+  t_object_segment BYTEA NOT NULL,
+  PRIMARY KEY (model_id, seq)
+);
+CREATE INDEX observations_by_segment ON observations(session_id, label);
+CREATE TABLE merge_records (
+  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
+  target BIGINT NOT NULL REFERENCES models(id),
+  source TEXT NOT NULL,
+  transform BYTEA NOT NULL,
+  icp_rmse_m DOUBLE PRECISION NOT NULL,
+  tsdf_rmse_m DOUBLE PRECISION NOT NULL,
+  tsdf_overlap BIGINT NOT NULL,
+  scene_checks BIGINT NOT NULL,
+  created_at TEXT NOT NULL
+);
+CREATE INDEX merge_records_by_target ON merge_records(target);
+INSERT INTO objdb_meta(key, value) VALUES ('application', 'objdb'), ('schema_version', '0');
+)sql";
+
+// Serialises schema preparation across servers (pg_advisory_xact_lock key: "OBJD").
+constexpr int64_t kSchemaLock = 0x4F424A44;
+
+// The schema version recorded in the database: 0 for an empty database; FAILED_PRECONDITION for
+// one with tables that are not objdb's.
+StatusOr<int> recordedVersion(const Connection& c, const std::string& describe) {
+  OBJDB_ASSIGN_OR_RETURN(Result meta,
+                         c.exec("SELECT to_regclass('objdb_meta') IS NOT NULL", "reading the schema"));
+  if (!meta.boolean(0, 0)) {
+    OBJDB_ASSIGN_OR_RETURN(
+        Result tables,
+        c.exec("SELECT COUNT(*) FROM information_schema.tables WHERE table_schema = "
+               "current_schema()",
+               "reading the schema"));
+    if (tables.integer(0, 0) != 0) {
+      return absl::FailedPreconditionError(absl::StrFormat(
+          "%s holds %d tables that are not objdb's (no objdb_meta table); refusing to touch it; "
+          "give objdb a database of its own",
+          describe, tables.integer(0, 0)));
+    }
+    return 0;
+  }
+  OBJDB_ASSIGN_OR_RETURN(Result rows, c.exec("SELECT key, value FROM objdb_meta WHERE key IN "
+                                             "('application', 'schema_version')",
+                                             "reading objdb_meta"));
+  std::string application;
+  int version = -1;
+  for (int r = 0; r < rows.rows(); ++r) {
+    if (rows.text(r, 0) == "application") application = rows.text(r, 1);
+    if (rows.text(r, 0) == "schema_version" && !absl::SimpleAtoi(rows.text(r, 1), &version)) {
+      version = -1;
+    }
+  }
+  if (application != "objdb" || version < 0) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "%s has an objdb_meta table of another application (application '%s'); refusing to "
+        "touch it",
+        describe, application));
+  }
+  return version;
+}
+
+}  // namespace
+
+const std::vector<Migration>& schemaMigrations() {
+  static const std::vector<Migration> migrations = {
+      {1, "sessions, maps, raw segments, models, observations, merge records", kSchemaV1},
+  };
+  return migrations;
+}
+
+StatusOr<SchemaState> prepareSchema(const Connection& c, const std::string& describe,
+                                    const std::vector<Migration>& migrations) {
+  if (migrations.empty()) return absl::InvalidArgumentError("no schema migrations given");
+  const int latest = migrations.back().version;
+  SchemaState state;
+  bool first = true;
+  while (true) {
+    OBJDB_RETURN_IF_ERROR(c.exec("BEGIN", "preparing the schema").status());
+    auto step = [&]() -> StatusOr<bool> {  // true: at the latest version
+      Params lock;
+      lock.add(kSchemaLock);
+      OBJDB_RETURN_IF_ERROR(
+          c.exec("SELECT pg_advisory_xact_lock($1)", lock, "locking the schema").status());
+      OBJDB_ASSIGN_OR_RETURN(const int version, recordedVersion(c, describe));
+      if (first) {
+        state.version_before = version;
+        state.created = version == 0;
+        first = false;
+      }
+      if (version > latest) {
+        return absl::FailedPreconditionError(absl::StrFormat(
+            "%s has objdb schema version %d, newer than this build reads (up to %d); use a "
+            "newer objdb",
+            describe, version, latest));
+      }
+      if (version == latest) return true;
+      const Migration* next = nullptr;
+      for (const auto& m : migrations) {
+        if (m.version > version) {
+          next = &m;
+          break;
+        }
+      }
+      const std::string context = absl::StrFormat("%s: migrating to schema %d (%s)", describe,
+                                                  next->version, next->description);
+      OBJDB_RETURN_IF_ERROR(c.script(next->sql, context));
+      Params v;
+      v.text(std::to_string(next->version));
+      OBJDB_RETURN_IF_ERROR(
+          c.exec("UPDATE objdb_meta SET value = $1 WHERE key = 'schema_version'", v, context)
+              .status());
+      if (!state.created) {
+        logger("storage")->info("{}: migrated to schema {} ({})", describe, next->version,
+                                next->description);
+      }
+      return next->version == latest;
+    };
+    auto done = step();
+    if (!done.ok()) {
+      (void)c.exec("ROLLBACK", "preparing the schema");
+      return done.status();
+    }
+    OBJDB_RETURN_IF_ERROR(c.exec("COMMIT", "preparing the schema").status());
+    if (*done) break;
+  }
+  state.version_after = latest;
+  return state;
+}
+
+}  // namespace objdb::storage::pg

@@ -1,0 +1,358 @@
+// PostgresStore's object models: a model's row and its observations, written in one
+// SERIALIZABLE transaction (every body here may run again after a serialization failure, so it
+// only reads and writes rows, never state outside them); reads of one model, of the matcher's
+// prefilter entries and of the listings' summaries, each from one snapshot.
+#include <algorithm>
+#include <map>
+#include <optional>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "storage/postgres/postgres_internal.h"
+
+namespace objdb::storage {
+
+using pg::Params;
+using pg::Result;
+
+namespace {
+
+// addModelColumns adds kModelColumns (row_codec.h) in their order.
+
+void addModelColumns(Params* p, const EncodedModel& e) {
+  p->add(e.planar).add(e.plane_inlier_ratio).add(e.num_points).add(e.num_keypoints);
+  p->add(e.voxel_size);
+  for (int k = 0; k < 3; ++k) p->add(double(e.bbox_min[k]));
+  for (int k = 0; k < 3; ++k) p->add(double(e.bbox_max[k]));
+  p->bytes(e.grid).bytes(e.surface_voxels).bytes(e.cloud).bytes(e.keypoints).bytes(e.descriptors);
+  p->add(e.timings.cloud_ms).add(e.timings.planarity_ms).add(e.timings.keypoints_ms);
+  p->add(e.timings.descriptors_ms).add(e.structure);
+}
+
+// "$first, $first+1, ..." for `n` parameters.
+std::string placeholders(int first, int n) {
+  std::string out;
+  for (int i = 0; i < n; ++i) absl::StrAppend(&out, i ? ", $" : "$", first + i);
+  return out;
+}
+
+// The observation rows of model `model_id` (replacing its earlier ones when `replace`), inside
+// the caller's write transaction.
+Status writeObservations(const pg::Connection& c, int64_t model_id, const EncodedModel& model,
+                         bool replace) {
+  if (replace) {
+    Params del;
+    del.add(model_id);
+    OBJDB_RETURN_IF_ERROR(
+        c.exec("DELETE FROM observations WHERE model_id = $1", del, "dropping observations")
+            .status());
+  }
+  for (size_t k = 0; k < model.observations.size(); ++k) {
+    const auto& o = model.observations[k];
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, pgstore::sessionIdForWrite(c, o.session));
+    Params p;
+    p.add(model_id).add(int64_t(k)).add(sid).add(o.label).bytes(o.T_world_object);
+    p.bytes(o.T_object_segment);
+    OBJDB_RETURN_IF_ERROR(
+        c.exec("INSERT INTO observations(model_id, seq, session_id, label, raw_segment_id, "
+               "t_world_object, t_object_segment) VALUES ($1, $2, $3, $4, (SELECT id FROM "
+               "raw_segments WHERE session_id = $3 AND label = $4), $5, $6)",
+               p, "storing an observation")
+            .status());
+  }
+  return absl::OkStatus();
+}
+
+// Active model `id` out of the active set: state removed, or merged into `merged_into` (> 0);
+// its blobs and observations dropped, its row kept. Inside the caller's write transaction.
+Status retireModel(const pg::Connection& c, int64_t id, int64_t merged_into) {
+  Params p;
+  p.text(merged_into > 0 ? "merged" : "removed");
+  if (merged_into > 0) {
+    p.add(merged_into);
+  } else {
+    p.null();
+  }
+  p.add(id);
+  OBJDB_ASSIGN_OR_RETURN(
+      Result r, c.exec(absl::StrFormat("UPDATE models SET state = $1, merged_into = $2::bigint, "
+                                       "grid = NULL, surface_voxels = NULL, cloud = NULL, "
+                                       "keypoints = NULL, descriptors = NULL, updated_at = %s "
+                                       "WHERE id = $3 AND state = 'active'",
+                                       pg::kNow),
+                       p, "retiring the model"));
+  if (r.affected() == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to %s", id,
+                                               merged_into > 0 ? "merge" : "remove"));
+  }
+  Params del;
+  del.add(id);
+  return c.exec("DELETE FROM observations WHERE model_id = $1", del, "dropping observations")
+      .status();
+}
+
+// Model `id`'s row and observations rewritten from `e`, with `merge` recorded when given. Inside
+// the caller's write transaction.
+Status rewriteModel(const pg::Connection& c, const EncodedModel& e, int64_t id,
+                    const database::MergeRecord* merge) {
+  std::string assignments;
+  int n = 1;
+  for (const absl::string_view column : absl::StrSplit(kModelColumns, ", ")) {
+    absl::StrAppend(&assignments, column, " = $", n++, ", ");
+  }
+  Params p;
+  addModelColumns(&p, e);
+  p.add(id);
+  OBJDB_ASSIGN_OR_RETURN(
+      Result r, c.exec(absl::StrFormat("UPDATE models SET %supdated_at = %s WHERE id = $%d AND "
+                                       "state = 'active'",
+                                       assignments, pg::kNow, kNumModelColumns + 1),
+                       p, "rewriting the model"));
+  if (r.affected() == 0) {
+    return absl::NotFoundError(absl::StrFormat("no object model %d to replace", id));
+  }
+  OBJDB_RETURN_IF_ERROR(writeObservations(c, id, e, /*replace=*/true));
+  if (merge == nullptr) return absl::OkStatus();
+  Params m;
+  m.add(merge->target).text(merge->source).bytes(encodeTransform(merge->T_target_source));
+  m.add(merge->icp_rmse_m).add(merge->tsdf_rmse_m).add(int64_t(merge->tsdf_overlap));
+  m.add(int64_t(merge->scene_checks));
+  return c.exec(absl::StrFormat("INSERT INTO merge_records(target, source, transform, "
+                                "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, scene_checks, "
+                                "created_at) VALUES ($1, $2, $3, $4, $5, $6, $7, %s)",
+                                pg::kNow),
+                m, "recording the merge")
+      .status();
+}
+
+}  // namespace
+
+StatusOr<int64_t> PostgresStore::addModel(model::ObjectModel model) {
+  const EncodedModel e = encodeModel(model, options_.blobs);
+  int64_t id = 0;
+  const Status status = impl_->write("adding an object model", [&](const pg::Connection& c) {
+    Params p;
+    addModelColumns(&p, e);
+    OBJDB_ASSIGN_OR_RETURN(
+        Result r, c.exec(absl::StrFormat("INSERT INTO models(%s, state, created_at, updated_at) "
+                                         "VALUES (%s, 'active', %s, %s) RETURNING id",
+                                         kModelColumns, placeholders(1, kNumModelColumns),
+                                         pg::kNow, pg::kNow),
+                         p, "inserting the models row"));
+    id = r.integer(0, 0);
+    return writeObservations(c, id, e, /*replace=*/false);
+  });
+  if (!status.ok()) return annotate(status, "adding an object model");
+  return id;
+}
+
+Status PostgresStore::replaceModel(model::ObjectModel model,
+                                   const std::optional<database::MergeRecord>& merge) {
+  const EncodedModel e = encodeModel(model, options_.blobs);
+  const std::string context = absl::StrFormat("replacing object model %d", model.id);
+  return annotate(impl_->write(context,
+                               [&](const pg::Connection& c) {
+                                 return rewriteModel(c, e, model.id, merge ? &*merge : nullptr);
+                               }),
+                  context);
+}
+
+Status PostgresStore::absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
+                                  int64_t absorbed) {
+  const std::string context =
+      absl::StrFormat("merging object model %d into object model %d", absorbed, target.id);
+  if (absorbed == target.id) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(context, ": a model cannot be merged into itself"));
+  }
+  const EncodedModel e = encodeModel(target, options_.blobs);
+  return annotate(impl_->write(context,
+                               [&](const pg::Connection& c) -> Status {
+                                 // The absorbed row stays for lineage (state merged,
+                                 // merged_into the target).
+                                 OBJDB_RETURN_IF_ERROR(retireModel(c, absorbed, target.id));
+                                 return rewriteModel(c, e, target.id, &merge);
+                               }),
+                  context);
+}
+
+Status PostgresStore::removeModel(int64_t id) {
+  // The row stays as a tombstone (ids are never reused; merge records keep their target).
+  return impl_->write(absl::StrFormat("removing object model %d", id),
+                      [&](const pg::Connection& c) { return retireModel(c, id, 0); });
+}
+
+StatusOr<std::shared_ptr<const model::ObjectModel>> PostgresStore::model(int64_t id) const {
+  std::optional<model::ObjectModel> out;
+  const std::string context = absl::StrFormat("reading object model %d", id);
+  OBJDB_RETURN_IF_ERROR(impl_->read(context, [&](const pg::Connection& c) -> Status {
+    out.reset();
+    Params p;
+    p.add(id);
+    OBJDB_ASSIGN_OR_RETURN(
+        Result s, c.exec(absl::StrFormat("SELECT %s FROM models WHERE id = $1 AND "
+                                         "state = 'active'",
+                                         kModelColumns),
+                         p, context));
+    if (s.rows() == 0) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
+    ModelColumns columns;
+    columns.planar = s.boolean(0, 0);
+    columns.plane_inlier_ratio = s.real(0, 1);
+    columns.grid = s.bytes(0, 11);
+    columns.surface_voxels = s.bytes(0, 12);
+    columns.cloud = s.bytes(0, 13);
+    columns.keypoints = s.bytes(0, 14);
+    columns.descriptors = s.bytes(0, 15);
+    columns.timings = {s.real(0, 16), s.real(0, 17), s.real(0, 18), s.real(0, 19)};
+    columns.structure = s.boolean(0, 20);
+    OBJDB_ASSIGN_OR_RETURN(model::ObjectModel m, decodeModel(id, columns));
+    OBJDB_ASSIGN_OR_RETURN(
+        Result o, c.exec("SELECT o.id, s.name, o.label, o.t_world_object, o.t_object_segment "
+                         "FROM observations o JOIN sessions s ON s.id = o.session_id "
+                         "WHERE o.model_id = $1 ORDER BY o.seq",
+                         p, context));
+    for (int row = 0; row < o.rows(); ++row) {
+      OBJDB_ASSIGN_OR_RETURN(model::Observation obs,
+                             decodeObservation({o.integer(row, 0), o.text(row, 1),
+                                                o.integer(row, 2), o.bytes(row, 3),
+                                                o.bytes(row, 4)}));
+      m.observations.push_back(std::move(obs));
+    }
+    out = std::move(m);
+    return absl::OkStatus();
+  }));
+  return std::shared_ptr<const model::ObjectModel>(
+      std::make_shared<model::ObjectModel>(std::move(*out)));
+}
+
+StatusOr<std::vector<ModelSummary>> PostgresStore::modelSummaries(const ModelQuery& query) const {
+  std::vector<ModelSummary> out;
+  OBJDB_RETURN_IF_ERROR(impl_->read("listing object models", [&](const pg::Connection& c)
+                                                                 -> Status {
+    out.clear();
+    Params p;
+    p.add(query.after_id).add(int64_t(std::min<size_t>(query.limit, size_t(1) << 30)));
+    std::string where =
+        query.include_merged ? "m.state IN ('active', 'merged')" : "m.state = 'active'";
+    if (!query.include_structure) where += " AND NOT m.structure";
+    if (!query.session.empty()) {
+      p.text(query.session);
+      where += " AND m.id IN (SELECT o.model_id FROM observations o JOIN sessions s ON "
+               "s.id = o.session_id WHERE s.name = $3)";
+    }
+    OBJDB_ASSIGN_OR_RETURN(
+        Result s,
+        c.exec(absl::StrFormat(
+                   "SELECT m.id, m.state, COALESCE(m.merged_into, 0), m.planar, m.num_points, "
+                   "m.num_keypoints, COALESCE(m.voxel_size, 0), COALESCE(m.bbox_min_x, 0), "
+                   "COALESCE(m.bbox_min_y, 0), COALESCE(m.bbox_min_z, 0), "
+                   "COALESCE(m.bbox_max_x, 0), COALESCE(m.bbox_max_y, 0), "
+                   "COALESCE(m.bbox_max_z, 0), (SELECT COUNT(*) FROM merge_records r WHERE "
+                   "r.target = m.id), m.structure FROM models m WHERE m.id > $1 AND %s "
+                   "ORDER BY m.id LIMIT $2",
+                   where),
+               p, "listing object models"));
+    std::map<int64_t, size_t> slot;
+    for (int row = 0; row < s.rows(); ++row) {
+      ModelSummary m;
+      m.id = s.integer(row, 0);
+      m.state = s.text(row, 1);
+      m.merged_into = s.integer(row, 2);
+      m.planar = s.boolean(row, 3);
+      m.num_points = s.integer(row, 4);
+      m.num_keypoints = s.integer(row, 5);
+      m.voxel_size = s.real(row, 6);
+      for (int k = 0; k < 3; ++k) {
+        m.bbox_min[k] = s.real(row, 7 + k);
+        m.bbox_max[k] = s.real(row, 10 + k);
+      }
+      m.merges = s.integer(row, 13);
+      m.structure = s.boolean(row, 14);
+      slot[m.id] = out.size();
+      out.push_back(std::move(m));
+    }
+    if (out.empty()) return absl::OkStatus();
+    // One round trip for the page's observations: the id range, then the page's ids.
+    Params range;
+    range.add(out.front().id).add(out.back().id);
+    OBJDB_ASSIGN_OR_RETURN(
+        Result o, c.exec("SELECT o.id, o.model_id, s.name, o.label, "
+                         "COALESCE(o.raw_segment_id, 0), o.t_world_object, "
+                         "COALESCE(r.parts, '') FROM observations o JOIN sessions s ON "
+                         "s.id = o.session_id LEFT JOIN raw_segments r ON "
+                         "r.id = o.raw_segment_id WHERE o.model_id BETWEEN $1 AND $2 "
+                         "ORDER BY o.model_id, o.seq",
+                         range, "listing observations"));
+    for (int row = 0; row < o.rows(); ++row) {
+      const auto it = slot.find(o.integer(row, 1));
+      if (it == slot.end()) continue;
+      auto T_wo = decodeTransform(o.bytes(row, 5));
+      if (!T_wo.ok()) {
+        return inRow(T_wo.status(), "observations", o.integer(row, 0), "t_world_object");
+      }
+      auto parts = parseParts(o.text(row, 6));
+      if (!parts.ok()) return inRow(parts.status(), "raw_segments", o.integer(row, 4), "parts");
+      out[it->second].observations.push_back({o.text(row, 2), uint32_t(o.integer(row, 3)),
+                                              o.integer(row, 4), *T_wo, std::move(*parts)});
+    }
+    return absl::OkStatus();
+  }));
+  return out;
+}
+
+StatusOr<std::vector<int64_t>> PostgresStore::modelIds() const {
+  std::vector<int64_t> ids;
+  OBJDB_RETURN_IF_ERROR(impl_->read("listing object model ids", [&](const pg::Connection& c)
+                                                                     -> Status {
+    ids.clear();
+    OBJDB_ASSIGN_OR_RETURN(Result r, c.exec("SELECT id FROM models WHERE state = 'active' "
+                                            "ORDER BY id",
+                                            "listing object model ids"));
+    for (int row = 0; row < r.rows(); ++row) ids.push_back(r.integer(row, 0));
+    return absl::OkStatus();
+  }));
+  return ids;
+}
+
+StatusOr<database::MatchEntries> PostgresStore::matchEntries() const {
+  database::MatchEntries out;
+  OBJDB_RETURN_IF_ERROR(impl_->read("reading match entries", [&](const pg::Connection& c)
+                                                                  -> Status {
+    out = {};
+    OBJDB_ASSIGN_OR_RETURN(
+        Result s, c.exec("SELECT id, planar, num_points, num_keypoints, descriptors, structure "
+                         "FROM models WHERE state = 'active' ORDER BY id",
+                         "reading match entries"));
+    std::map<int64_t, size_t> slot;
+    for (int row = 0; row < s.rows(); ++row) {
+      database::MatchEntry e;
+      e.id = s.integer(row, 0);
+      e.planar = s.boolean(row, 1);
+      e.structure = s.boolean(row, 5);
+      e.num_points = size_t(s.integer(row, 2));
+      e.num_keypoints = size_t(s.integer(row, 3));
+      auto descriptors = decodeDescriptors(s.bytes(row, 4));
+      if (!descriptors.ok()) {
+        out.skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
+        continue;
+      }
+      e.descriptors = std::move(*descriptors);
+      slot[e.id] = out.entries.size();
+      out.entries.push_back(std::move(e));
+    }
+    OBJDB_ASSIGN_OR_RETURN(
+        Result o, c.exec("SELECT o.model_id, s.name, o.label FROM observations o "
+                         "JOIN sessions s ON s.id = o.session_id ORDER BY o.model_id, o.seq",
+                         "reading match entries"));
+    for (int row = 0; row < o.rows(); ++row) {
+      const auto it = slot.find(o.integer(row, 0));
+      if (it == slot.end()) continue;
+      out.entries[it->second].segments.push_back({o.text(row, 1), uint32_t(o.integer(row, 2))});
+    }
+    return absl::OkStatus();
+  }));
+  return out;
+}
+
+}  // namespace objdb::storage

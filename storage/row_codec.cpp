@@ -1,0 +1,286 @@
+#include "storage/row_codec.h"
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+
+namespace objdb::storage {
+
+Status inRow(const Status& status, std::string_view table, int64_t row, std::string_view column) {
+  return annotate(status, absl::StrFormat("%s row %d, column %s", table, row, column));
+}
+
+std::string formatParts(const std::vector<uint32_t>& parts) { return absl::StrJoin(parts, ","); }
+
+StatusOr<std::vector<uint32_t>> parseParts(const std::string& text) {
+  std::vector<uint32_t> parts;
+  if (text.empty()) return parts;
+  for (const absl::string_view item : absl::StrSplit(text, ',')) {
+    uint32_t label = 0;
+    if (!absl::SimpleAtoi(item, &label) || label == 0) {
+      return absl::DataLossError(absl::StrFormat("parts \"%s\" is not a list of GSM labels", text));
+    }
+    parts.push_back(label);
+  }
+  return parts;
+}
+
+EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
+  EncodedModel e;
+  e.planar = m.planar;
+  e.structure = m.structure;
+  e.plane_inlier_ratio = m.plane_inlier_ratio;
+  e.num_points = int64_t(m.cloud.points.size());
+  e.num_keypoints = int64_t(m.keypoint_indices.size());
+  e.voxel_size = m.grid.voxelSize();
+  if (!m.cloud.points.empty()) {
+    e.bbox_min = e.bbox_max = m.cloud.points.front();
+    for (const auto& p : m.cloud.points) {
+      e.bbox_min = e.bbox_min.cwiseMin(p);
+      e.bbox_max = e.bbox_max.cwiseMax(p);
+    }
+  }
+  e.grid = encodeTsdfGrid(m.grid, options);
+  e.surface_voxels = encodeVoxelList(m.surface_voxels, options);
+  e.cloud = encodePointCloud(m.cloud, options);
+  e.keypoints = encodeIndices(m.keypoint_indices, options);
+  e.descriptors = encodeDescriptors(m.descriptors, options);
+  e.timings = m.timings;
+  for (const auto& o : m.observations) {
+    e.observations.push_back({o.session, int64_t(o.label), encodeTransform(o.T_world_object),
+                              encodeTransform(o.T_object_segment)});
+  }
+  return e;
+}
+
+StatusOr<model::ObjectModel> decodeModel(int64_t id, const ModelColumns& c) {
+  auto grid = decodeTsdfGrid(c.grid);
+  if (!grid.ok()) return inRow(grid.status(), "models", id, "grid");
+  model::ObjectModel m(std::move(*grid));
+  m.id = id;
+  m.planar = c.planar;
+  m.structure = c.structure;
+  m.plane_inlier_ratio = float(c.plane_inlier_ratio);
+  auto voxels = decodeVoxelList(c.surface_voxels);
+  if (!voxels.ok()) return inRow(voxels.status(), "models", id, "surface_voxels");
+  m.surface_voxels = std::move(*voxels);
+  auto cloud = decodePointCloud(c.cloud);
+  if (!cloud.ok()) return inRow(cloud.status(), "models", id, "cloud");
+  m.cloud = std::move(*cloud);
+  auto keypoints = decodeIndices(c.keypoints);
+  if (!keypoints.ok()) return inRow(keypoints.status(), "models", id, "keypoints");
+  m.keypoint_indices = std::move(*keypoints);
+  auto descriptors = decodeDescriptors(c.descriptors);
+  if (!descriptors.ok()) return inRow(descriptors.status(), "models", id, "descriptors");
+  m.descriptors = std::move(*descriptors);
+  m.timings = c.timings;
+  const std::string where = absl::StrFormat("object model %d", id);
+  for (uint32_t k : m.keypoint_indices) {
+    if (k >= m.cloud.points.size()) {
+      return absl::DataLossError(absl::StrFormat(
+          "%s: keypoint index %d beyond its %d cloud points", where, k, m.cloud.points.size()));
+    }
+  }
+  if (m.descriptors.size() != m.keypoint_indices.size() && !m.descriptors.empty()) {
+    return absl::DataLossError(absl::StrFormat("%s: %d descriptors for %d keypoints", where,
+                                               m.descriptors.size(), m.keypoint_indices.size()));
+  }
+  return m;
+}
+
+StatusOr<model::Observation> decodeObservation(const ObservationColumns& c) {
+  model::Observation obs;
+  obs.session = c.session;
+  obs.label = uint32_t(c.label);
+  auto T_wo = decodeTransform(c.T_world_object);
+  if (!T_wo.ok()) return inRow(T_wo.status(), "observations", c.row, "T_world_object");
+  auto T_os = decodeTransform(c.T_object_segment);
+  if (!T_os.ok()) return inRow(T_os.status(), "observations", c.row, "T_object_segment");
+  obs.T_world_object = *T_wo;
+  obs.T_object_segment = *T_os;
+  return obs;
+}
+
+StatusOr<EncodedRawSegment> encodeRawSegment(const database::RawSegmentRecord& segment,
+                                             const BlobOptions& options) {
+  if (segment.grid == nullptr) {
+    return absl::InvalidArgumentError(absl::StrFormat("raw segment %s/%d has no grid",
+                                                      segment.key.session, segment.key.label));
+  }
+  if (!segment.voxel_parts.empty() && segment.voxel_parts.size() != segment.voxels.size()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "raw segment %s/%d: %d voxel parts for %d voxels", segment.key.session, segment.key.label,
+        segment.voxel_parts.size(), segment.voxels.size()));
+  }
+  EncodedRawSegment e;
+  e.pose = encodeTransform(segment.T_world_segment);
+  e.grid = encodeTsdfGrid(*segment.grid, options);
+  e.voxels = encodeVoxelList(segment.voxels, options);
+  if (!segment.voxel_parts.empty()) e.voxel_parts = encodeIndices(segment.voxel_parts, options);
+  e.parts = formatParts(segment.parts);
+  return e;
+}
+
+StatusOr<std::shared_ptr<const database::RawSegmentRecord>> decodeRawSegment(
+    const database::SegmentKey& key, const RawSegmentColumns& c) {
+  const int64_t id = c.row;
+  auto record = std::make_shared<database::RawSegmentRecord>();
+  record->key = key;
+  auto pose = decodeTransform(c.pose);
+  if (!pose.ok()) return inRow(pose.status(), "raw_segments", id, "pose");
+  record->T_world_segment = *pose;
+  auto grid = decodeTsdfGrid(c.grid);
+  if (!grid.ok()) return inRow(grid.status(), "raw_segments", id, "grid");
+  record->grid = std::make_shared<const tsdf::TsdfLayer>(std::move(*grid));
+  auto voxels = decodeVoxelList(c.voxels);
+  if (!voxels.ok()) return inRow(voxels.status(), "raw_segments", id, "voxels");
+  record->voxels = std::move(*voxels);
+  record->extraction_frame = c.extraction_frame;
+  record->observation_depth_m = float(c.observation_depth_m);
+  auto parts = parseParts(c.parts);
+  if (!parts.ok()) return inRow(parts.status(), "raw_segments", id, "parts");
+  record->parts = std::move(*parts);
+  if (c.voxel_parts) {
+    auto voxel_parts = decodeIndices(*c.voxel_parts);
+    if (!voxel_parts.ok()) return inRow(voxel_parts.status(), "raw_segments", id, "voxel_parts");
+    if (voxel_parts->size() != record->voxels.size()) {
+      return inRow(absl::DataLossError(absl::StrFormat("%d voxel parts for %d voxels",
+                                                       voxel_parts->size(), record->voxels.size())),
+                   "raw_segments", id, "voxel_parts");
+    }
+    record->voxel_parts = std::move(*voxel_parts);
+  }
+  return std::shared_ptr<const database::RawSegmentRecord>(std::move(record));
+}
+
+StatusOr<EncodedMap> encodeMap(const std::string& what, const tsdf::TsdfLayer& map,
+                               const gsm::LabelBlocks* labels, const BlobOptions& options) {
+  EncodedMap e;
+  e.voxel_size = map.voxelSize();
+  e.voxels_per_side = map.voxelsPerSide();
+  e.tsdf.reserve(map.numBlocks());
+  for (const auto& [index, block] : map.blocks()) {
+    e.tsdf.push_back({index, encodeTsdfBlock(*block, options)});
+  }
+  if (labels != nullptr) {
+    const size_t voxels = size_t(e.voxels_per_side * e.voxels_per_side * e.voxels_per_side);
+    for (const auto& [index, block] : *labels) {
+      if (block.size() != voxels) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "%s: label block (%d, %d, %d) has %d labels, the grid's blocks %d", what, index.x(),
+            index.y(), index.z(), block.size(), voxels));
+      }
+      e.labels.push_back({index, encodeLabelBlock(block, options)});
+    }
+  }
+  return e;
+}
+
+StatusOr<std::vector<uint32_t>> decodeMapLabels(std::string_view blob, int64_t voxels_per_side,
+                                                const std::string& where) {
+  auto decoded = decodeLabelBlock(blob);
+  const int64_t n = voxels_per_side * voxels_per_side * voxels_per_side;
+  if (decoded.ok() && decoded->size() != size_t(n)) {
+    decoded = absl::DataLossError(absl::StrFormat("%d labels, expected %d", decoded->size(), n));
+  }
+  if (!decoded.ok()) return annotate(decoded.status(), where);
+  return decoded;
+}
+
+StatusOr<tsdf::TsdfLayer> emptyMap(const std::string& what, double voxel_size,
+                                   int64_t voxels_per_side) {
+  auto layer = tsdf::TsdfLayer::create(float(voxel_size), int(voxels_per_side));
+  if (!layer.ok()) {
+    return absl::DataLossError(absl::StrFormat("%s: %s", what, layer.status().message()));
+  }
+  return layer;
+}
+
+const std::vector<BlobColumn>& checkedBlobColumns() {
+  static const std::vector<BlobColumn> columns = {
+      {"models", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
+      {"models", "surface_voxels", [](auto b) { return decodeVoxelList(b).status(); }},
+      {"models", "cloud", [](auto b) { return decodePointCloud(b).status(); }},
+      {"models", "keypoints", [](auto b) { return decodeIndices(b).status(); }},
+      {"models", "descriptors", [](auto b) { return decodeDescriptors(b).status(); }},
+      {"observations", "T_world_object", [](auto b) { return decodeTransform(b).status(); }},
+      {"observations", "T_object_segment", [](auto b) { return decodeTransform(b).status(); }},
+      {"raw_segments", "pose", [](auto b) { return decodeTransform(b).status(); }},
+      {"raw_segments", "grid", [](auto b) { return decodeTsdfGrid(b).status(); }},
+      {"raw_segments", "voxels", [](auto b) { return decodeVoxelList(b).status(); }},
+      {"raw_segments", "voxel_parts", [](auto b) { return decodeIndices(b).status(); }},
+      {"merge_records", "transform", [](auto b) { return decodeTransform(b).status(); }},
+      {"scene_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
+      {"saved_label_blocks", "labels", [](auto b) { return decodeLabelBlock(b).status(); }},
+  };
+  return columns;
+}
+
+const std::vector<StatsTable>& statsTables() {
+  static const std::vector<StatsTable> tables = {
+      {"sessions", "0"},
+      {"scene_blocks", "length(tsdf)"},
+      {"scene_label_blocks", "length(labels)"},
+      {"saved_blocks", "length(tsdf)"},
+      {"saved_label_blocks", "length(labels)"},
+      {"raw_segments", "length(pose) + length(grid) + length(voxels)"},
+      {"models",
+       "COALESCE(length(grid), 0) + COALESCE(length(surface_voxels), 0) + "
+       "COALESCE(length(cloud), 0) + COALESCE(length(keypoints), 0) + "
+       "COALESCE(length(descriptors), 0)"},
+      {"observations", "length(T_world_object) + length(T_object_segment)"},
+      {"merge_records", "length(transform)"},
+  };
+  return tables;
+}
+
+Status checkTsdfBlock(std::string_view blob, int64_t voxels_per_side) {
+  if (!(voxels_per_side >= 2 && voxels_per_side <= 64)) {
+    return absl::DataLossError(absl::StrFormat("map has %d voxels per side", voxels_per_side));
+  }
+  tsdf::TsdfBlock block(static_cast<int>(voxels_per_side));
+  return decodeTsdfBlock(blob, int(voxels_per_side), &block);
+}
+
+template <typename Value>
+std::optional<Value> SceneCache::get(Entries<Value>* cache, const std::string& key) {
+  std::lock_guard lock(mutex_);
+  for (auto it = cache->begin(); it != cache->end(); ++it) {
+    if (it->first == key) {
+      cache->splice(cache->begin(), *cache, it);
+      return cache->front().second;
+    }
+  }
+  return std::nullopt;
+}
+
+template <typename Value>
+void SceneCache::put(Entries<Value>* cache, const std::string& key, Value value) {
+  std::lock_guard lock(mutex_);
+  cache->remove_if([&key](const auto& entry) { return entry.first == key; });
+  cache->emplace_front(key, std::move(value));
+  while (cache->size() > max_entries_) cache->pop_back();
+}
+
+std::optional<std::shared_ptr<const tsdf::TsdfLayer>> SceneCache::scene(
+    const std::string& session) {
+  return get(&scenes_, session);
+}
+
+std::optional<std::shared_ptr<const gsm::LabelBlocks>> SceneCache::labels(
+    const std::string& session) {
+  return get(&labels_, session);
+}
+
+void SceneCache::putScene(const std::string& session,
+                          std::shared_ptr<const tsdf::TsdfLayer> scene) {
+  put(&scenes_, session, std::move(scene));
+}
+
+void SceneCache::putLabels(const std::string& session,
+                           std::shared_ptr<const gsm::LabelBlocks> labels) {
+  put(&labels_, session, std::move(labels));
+}
+
+}  // namespace objdb::storage
