@@ -244,7 +244,7 @@ StatusOr<ConnectionPool::Lease> ConnectionPool::acquire() const {
 Status ConnectionPool::transact(Kind kind, int max_retries, std::string_view context,
                                 const std::function<Status(const Connection&)>& body) const {
   const char* begin = kind == Kind::kWrite
-                          ? "BEGIN ISOLATION LEVEL SERIALIZABLE"
+                          ? "BEGIN ISOLATION LEVEL READ COMMITTED"
                           : "BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY";
   bool reconnected = false;
   thread_local std::minstd_rand jitter(std::random_device{}());

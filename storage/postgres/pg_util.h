@@ -1,6 +1,7 @@
 // A thin layer over libpq for the PostgreSQL store (postgres_store.h): typed parameters sent in
 // binary (never SQL built from values), results read in binary, errors as Status by SQLSTATE
-// class, a bounded pool of connections, and transactions retried on serialization failure.
+// class, a bounded pool of connections, and transactions retried on deadlock or serialization
+// failure.
 #pragma once
 
 #include <libpq-fe.h>
@@ -117,7 +118,7 @@ class ConnectionPool {
   StatusOr<Lease> acquire() const;
 
   enum class Kind {
-    kWrite,  // SERIALIZABLE
+    kWrite,  // READ COMMITTED: the rows a write updates are locked until it commits
     kRead,   // REPEATABLE READ, READ ONLY: one snapshot
   };
   // Runs `body` in one transaction on one connection and commits it. A serialization failure or

@@ -22,7 +22,7 @@ class PostgresStore::Impl {
         pool(uri, describe, options.pool_size, options.connect_timeout_s),
         scenes(size_t(options.max_cached_scenes)) {}
 
-  // One write transaction (SERIALIZABLE, retried on conflict), annotated with `context`.
+  // One write transaction (READ COMMITTED with row locks, retried on deadlock), annotated with `context`.
   Status write(std::string_view context, const std::function<Status(const pg::Connection&)>& body) {
     return pool.transact(pg::ConnectionPool::Kind::kWrite, options.max_transaction_retries, context,
                          body);

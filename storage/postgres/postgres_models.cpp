@@ -1,6 +1,6 @@
-// PostgresStore's object models: a model's row and its observations, written in one
-// SERIALIZABLE transaction (every body here may run again after a serialization failure, so it
-// only reads and writes rows, never state outside them); reads of one model, of the matcher's
+// PostgresStore's object models: a model's row and its observations, written in one transaction
+// that locks the model rows it updates (the UPDATE first, then its observations; every body may
+// run again after a deadlock, so it only reads and writes rows, never state outside them); reads of one model, of the matcher's
 // prefilter entries and of the listings' summaries, each from one snapshot.
 #include <algorithm>
 #include <map>

@@ -1,7 +1,8 @@
 // The networked backend of storage::Store (storage/store.h; docs/storage.md): one PostgreSQL
 // database reached through libpq, shared by several objdb servers. A pool of connections; every
-// mutation one SERIALIZABLE transaction, retried (a bounded, counted number of times) when
-// PostgreSQL reports a serialization failure or a deadlock; every read of several rows one
+// mutation one READ COMMITTED transaction that locks the rows it updates before their dependants
+// (a model row before its observations, a map row before its blocks), retried (a bounded,
+// counted number of times) when PostgreSQL reports a deadlock or serialization failure; every read of several rows one
 // REPEATABLE READ snapshot. Binary data in the same checksummed blobs as the SQLite backend
 // (storage/blob_codec.h), as bytea. Statements take parameters only. The implementation is split
 // like the SQLite one: postgres_store.cpp (opening, raw segments, merge records),
