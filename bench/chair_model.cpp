@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <vector>
+#include <cstdint>
+#include <utility>
+
+#include "core/model/features.h"
 
 namespace objdb::bench {
 namespace {
@@ -30,14 +33,13 @@ float chairSdf(const Eigen::Vector3f& p, float width, float depth, float seat_he
 
 }  // namespace
 
-StatusOr<model::ObjectModel> chairModel(int variant, int threads,
-                                        const Eigen::Isometry3f& T_frame_chair) {
-  const float voxel = 0.01f, trunc = 0.03f;
+std::vector<tsdf::VoxelIndex> addChair(tsdf::TsdfLayer* grid, int variant,
+                                       const Eigen::Isometry3f& T_grid_chair) {
+  const float voxel = grid->voxelSize(), trunc = 3.0f * voxel;
   const float width = 0.44f + 0.02f * float(variant), depth = 0.42f + 0.015f * float(variant);
   const float seat = 0.45f, back = 0.40f + 0.02f * float(variant);
-  tsdf::TsdfLayer grid = tsdf::TsdfLayer::create(voxel, 8).value();
   std::vector<tsdf::VoxelIndex> voxels;
-  // The chair's box (with a 5 cm margin) in the model frame: the corners' bounds.
+  // The chair's box (with a 5 cm margin) in the grid's frame: the corners' bounds.
   const Eigen::Vector3f box_lo(-width / 2 - 0.05f, -depth / 2 - 0.05f, -0.05f);
   const Eigen::Vector3f box_hi(width / 2 + 0.05f, depth / 2 + 0.05f, seat + back + 0.05f);
   Eigen::Vector3f frame_lo = Eigen::Vector3f::Constant(INFINITY), frame_hi = -frame_lo;
@@ -45,21 +47,21 @@ StatusOr<model::ObjectModel> chairModel(int variant, int threads,
     const Eigen::Vector3f c((corner & 1) ? box_hi.x() : box_lo.x(),
                             (corner & 2) ? box_hi.y() : box_lo.y(),
                             (corner & 4) ? box_hi.z() : box_lo.z());
-    frame_lo = frame_lo.cwiseMin(T_frame_chair * c);
-    frame_hi = frame_hi.cwiseMax(T_frame_chair * c);
+    frame_lo = frame_lo.cwiseMin(T_grid_chair * c);
+    frame_hi = frame_hi.cwiseMax(T_grid_chair * c);
   }
   const Eigen::Vector3i lo = (frame_lo / voxel).array().floor().cast<int>();
   const Eigen::Vector3i hi = (frame_hi / voxel).array().ceil().cast<int>();
-  const Eigen::Isometry3f T_chair_frame = T_frame_chair.inverse();
+  const Eigen::Isometry3f T_chair_grid = T_grid_chair.inverse();
   for (int x = lo.x(); x <= hi.x(); ++x) {
     for (int y = lo.y(); y <= hi.y(); ++y) {
       for (int z = lo.z(); z <= hi.z(); ++z) {
         const tsdf::VoxelIndex v(x, y, z);
-        const Eigen::Vector3f c = grid.voxelCenter(v);
-        const float d = chairSdf(T_chair_frame * c, width, depth, seat, back);
+        const Eigen::Vector3f c = grid->voxelCenter(v);
+        const float d = chairSdf(T_chair_grid * c, width, depth, seat, back);
         if (std::abs(d) > trunc) continue;
-        tsdf::TsdfBlock& block = grid.allocateBlock(grid.blockOfVoxel(v));
-        tsdf::TsdfVoxel& out = block.voxel(grid.linearInBlock(v));
+        tsdf::TsdfBlock& block = grid->allocateBlock(grid->blockOfVoxel(v));
+        tsdf::TsdfVoxel& out = block.voxel(grid->linearInBlock(v));
         out.distance = d;
         // Weights as a sensor leaves them: higher where seen more often, varying smoothly.
         out.weight = 5.0f + 20.0f * (0.5f + 0.5f * std::sin(c.x() * 13.0f + c.z() * 7.0f));
@@ -68,10 +70,34 @@ StatusOr<model::ObjectModel> chairModel(int variant, int threads,
       }
     }
   }
+  return voxels;
+}
+
+ChairGrid chairGrid(int variant, const Eigen::Isometry3f& T_frame_chair) {
+  tsdf::TsdfLayer grid = tsdf::TsdfLayer::create(0.01f, 8).value();
+  std::vector<tsdf::VoxelIndex> voxels = addChair(&grid, variant, T_frame_chair);
+  return ChairGrid{std::move(grid), std::move(voxels)};
+}
+
+StatusOr<model::ObjectModel> chairModel(int variant, int threads,
+                                        const Eigen::Isometry3f& T_frame_chair) {
+  ChairGrid chair = chairGrid(variant, T_frame_chair);
   model::ModelBuildParams params;
   params.mesh_min_weight = 1.0f;
   params.threads = threads;
-  return model::buildModel(std::move(grid), voxels, params);
+  return model::buildModel(std::move(chair.grid), chair.surface_voxels, params);
+}
+
+StatusOr<model::ObjectModel> describedChairModel(int variant, size_t num_keypoints) {
+  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel built, chairModel(variant));
+  std::vector<uint32_t> keypoints;
+  const size_t n = built.cloud.points.size();
+  for (size_t k = 0; k < num_keypoints && k < n; ++k) {
+    keypoints.push_back(uint32_t(k * n / num_keypoints));
+  }
+  built.descriptors = model::computeFpfh(built.cloud, &keypoints, DescriptorParams{});
+  built.keypoint_indices = std::move(keypoints);
+  return built;
 }
 
 }  // namespace objdb::bench

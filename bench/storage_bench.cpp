@@ -23,7 +23,6 @@
 #include "core/common/params.h"
 #include "core/database/prefilter_index.h"
 #include "core/matching/registration.h"
-#include "core/model/features.h"
 #include "core/model/object_model.h"
 #include "storage/blob_codec.h"
 #include "storage/open_store.h"
@@ -38,18 +37,11 @@ double secondsSince(Clock::time_point t) {
 
 // The model the database would build from a chair segment, with 500 described keypoints.
 model::ObjectModel chairModel(int variant) {
-  auto built = bench::chairModel(variant);
+  auto built = bench::describedChairModel(variant);
   if (!built.ok()) {
     std::fprintf(stderr, "storage_bench: %s\n", std::string(built.status().message()).c_str());
     std::exit(1);
   }
-  // The issue sizes a model at ~500 keypoints; ISS ∪ Harris3D finds fewer on this clean shape,
-  // so spread 500 over the cloud and describe them with the same FPFH.
-  std::vector<uint32_t> keypoints;
-  const size_t n = built->cloud.points.size();
-  for (size_t k = 0; k < 500 && k < n; ++k) keypoints.push_back(uint32_t(k * n / 500));
-  built->descriptors = model::computeFpfh(built->cloud, &keypoints, DescriptorParams{});
-  built->keypoint_indices = std::move(keypoints);
   return std::move(*built);
 }
 

@@ -40,8 +40,8 @@ options:
                           can reach the port can read and write the database.
   --db PATH|URI           SQLite database file, created if missing (default %s), or a
                           PostgreSQL database as a libpq URI (postgresql://USER@HOST/DB;
-                          password from ~/.pgpass or PGPASSWORD, TLS per sslmode; one objdb
-                          server per database for now; docs/storage.md); a corrupt file, an
+                          password from ~/.pgpass or PGPASSWORD, TLS per sslmode; several
+                          servers may share one, docs/storage.md); a corrupt file, an
                           unreachable server, another application's database or a newer
                           schema refuses the start, and the database is left untouched
   --config FILE           pipeline parameters as JSON, e.g. {"tsdf": {"voxel_size_m": 0.01}};
@@ -57,6 +57,11 @@ options:
                           --auto-end-s is 0, once more a few seconds after its stream went), so
                           that a crash loses only the frames after the last save: the next
                           start ends the session from it; 0 = never (default 60)
+  --server-id NAME        this server's name as holder of session leases, unique among the
+                          servers on one database (default host:pid:random)
+  --lease-s S             a session's lease lasts S seconds without renewal (renewed every S/3);
+                          when its server dies, another server on the database takes the
+                          session over after that, 0.1..3600 (default 15)
   --slow-reader-s N       end an Ingest stream whose client has read none of its events for N
                           seconds while they wait (at 64 waiting acks and events its frames
                           wait too), with RESOURCE_EXHAUSTED; the session is kept
@@ -167,6 +172,19 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
         return false;
       }
       cli->options.save_map_every =
+          std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
+    } else if (arg == "--server-id") {
+      if (!take_value(&cli->options.server_id)) return false;
+    } else if (arg == "--lease-s") {
+      std::string text;
+      if (!take_value(&text)) return false;
+      double seconds = 0.0;
+      if (!absl::SimpleAtod(text, &seconds) || !(seconds >= 0.1 && seconds <= 3600.0)) {
+        *error = absl::StrFormat("%s must be a number of seconds in [0.1, 3600], got \"%s\"",
+                                 arg, text);
+        return false;
+      }
+      cli->options.lease_ttl =
           std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
     } else if (arg == "--slow-reader-s") {
       int seconds = 0;

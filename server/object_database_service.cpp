@@ -1,12 +1,17 @@
 #include "server/object_database_service.h"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
+#include <cstdio>
 #include <deque>
 #include <future>
 #include <mutex>
+#include <random>
+#include <set>
 #include <thread>
 #include <utility>
 
@@ -27,6 +32,15 @@ namespace {
 
 // How long after its stream went a session still open gets its last frames saved.
 constexpr std::chrono::milliseconds kIdleSaveDelay{5000};
+
+// A lease holder's name unique among the servers on one database: host, process, and a random
+// part (a restarted process may get the same pid).
+std::string defaultServerId() {
+  char host[256] = {};
+  if (gethostname(host, sizeof(host) - 1) != 0) std::snprintf(host, sizeof(host), "host");
+  std::random_device random;
+  return absl::StrFormat("%s:%d:%08x", host, int(getpid()), uint32_t(random()));
+}
 
 }  // namespace
 
@@ -58,7 +72,9 @@ ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
       store_(store),
       db_(std::move(db)),
       database_queue_(std::make_unique<JobQueue>()) {
+  server_id_ = options_.server_id.empty() ? defaultServerId() : options_.server_id;
   if (options_.auto_end_after.count() > 0) janitor_ = std::thread([this] { endIdleSessions(); });
+  keeper_ = std::thread([this] { keepLeases(); });
 }
 
 void ObjectDatabaseService::endIdleSessions() {
@@ -120,6 +136,7 @@ void ObjectDatabaseService::stop() {
     workers.swap(workers_);
   }
   janitor_wake_.notify_all();
+  keeper_wake_.notify_all();
   if (janitor_.joinable()) janitor_.join();
   for (auto& w : workers) w.thread.join();
   // No stream runs any more: every session not ended is ended here, its map stored, so that a
@@ -136,12 +153,26 @@ void ObjectDatabaseService::stop() {
     logger("server")->info("session {} did not end before the server stopped: ending it",
                            session->name);
     database_queue_->push([this, session] {
-      if (endByServer(*session).ok()) return;
+      if (session->leaseLost() || endByServer(*session).ok()) return;
       (void)store_->finishSession(session->name, storage::SessionState::kInterrupted,
                                   int64_t(session->snapshot().frames_integrated()));
     });
   }
+  // The keeper renews the leases until every session is ended or marked interrupted; then they
+  // go, and nothing is left for another server to take over.
+  database_queue_->push([this] {
+    std::unique_lock lock(mutex_);
+    keeper_stop_ = true;
+    keeper_wake_.notify_all();
+  });
   database_queue_.reset();  // runs what is queued, then stops
+  if (keeper_.joinable()) keeper_.join();
+  std::set<std::string> leased;
+  {
+    std::lock_guard lock(mutex_);
+    leased = leased_;
+  }
+  for (const auto& name : leased) releaseLease(name);
 }
 
 void ObjectDatabaseService::startWorker(std::function<void()> work) {
@@ -207,16 +238,22 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
     }
   }
   OBJDB_RETURN_IF_ERROR(startPipeline(*session, options_.integration_threads));
+  OBJDB_RETURN_IF_ERROR(leaseNewSession(session->name));
 
-  std::lock_guard lock(mutex_);
-  if (stopped_) return absl::UnavailableError("the server is shutting down");
-  OBJDB_RETURN_IF_ERROR(checkSessionLimit());
+  std::unique_lock lock(mutex_);
+  Status opened = stopped_ ? absl::UnavailableError("the server is shutting down")
+                           : checkSessionLimit();
   storage::SessionInfo info;
   info.name = session->name;
   info.intrinsics_json = storage::intrinsicsJson(session->intrinsics);
   info.params_json = paramsToJson(session->params);
   // ALREADY_EXISTS when the database has a session of that name.
-  OBJDB_RETURN_IF_ERROR(store_->beginSession(info).status());
+  if (opened.ok()) opened = store_->beginSession(info).status();
+  if (!opened.ok()) {
+    lock.unlock();
+    releaseLease(session->name);
+    return opened;
+  }
   session->started_unix_s = nowUnixSeconds();
   session->stream = stream;  // before it is published: EndSession looks at the stream
   sessions_[session->name] = session;
@@ -350,6 +387,10 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
   }
   jobs_cancelled_.fetch_add(1);
   endStreaming(*opened, true);
+  if (session.leaseLost()) {
+    stream->finish(toGrpcStatus(lostLease(session.name)));
+    return;
+  }
   stream->finish(grpc::Status(grpc::StatusCode::CANCELLED, "the Ingest stream was interrupted"));
   logger("server")->warn("session {}: stream interrupted; EndSession can still flush its map",
                          session.name);
@@ -360,7 +401,7 @@ void ObjectDatabaseService::endStreaming(const std::shared_ptr<LiveSession>& ses
   if (interrupted) {
     // Stored on the database thread, so that it lands before any EndSession flush queued later.
     database_queue_->push([this, session] {
-      if (session->ended()) return;
+      if (session->ended() || session->leaseLost()) return;
       (void)store_->finishSession(session->name, storage::SessionState::kInterrupted,
                                   int64_t(session->snapshot().frames_integrated()));
     });
@@ -494,6 +535,7 @@ Status failInsert(IngestStream* stream, const Status& failed) {
 Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
                                      RawSegmentJob& job) {
   const gsm::RawSegment& segment = job.segment;
+  if (session.leaseLost()) return lostLease(session.name);
   if (job.withdraw) return withdraw(session, stream, segment.label);
   // Model-to-scene verification on the live path: this session's poses against the map as it
   // was when the segment was extracted, another live session's against its newest snapshot,
@@ -596,6 +638,7 @@ Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* strea
 }
 
 Status ObjectDatabaseService::flush(LiveSession& session) {
+  if (session.leaseLost()) return lostLease(session.name);
   if (!session.flush_extracted) {
     for (auto& job : extractSegments(session, true, v1::SegmentExtracted::SESSION_END)) {
       session.flush_jobs.push_back(std::move(job));
@@ -626,6 +669,7 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
   }
   logger("server")->info("session {} ended: {} frames, {} segments flushed at the end",
                          session.name, frames, flushed);
+  releaseLease(session.name);
   return absl::OkStatus();
 }
 

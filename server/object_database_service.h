@@ -72,6 +72,12 @@ struct ServiceOptions {
   size_t mesh_chunk_bytes = 1 << 20;           // GetSceneMesh chunk size
   size_t max_send_message_bytes = 16 << 20;    // GetObject larger than this: RESOURCE_EXHAUSTED
   std::string version = "0.1.0";
+  // Several servers on one database (docs/storage.md): each session is leased by the server that
+  // streams or ends it, renewed every lease_ttl / 3; a lease not renewed for lease_ttl expires,
+  // and then another server takes the session over (ends it from its saved map, as at a
+  // restart). `server_id` names this server as lease holder; empty: host:pid:random.
+  std::string server_id;
+  std::chrono::milliseconds lease_ttl{15 * 1000};
   // Every call must carry "authorization: Bearer <token>" (server/auth.h); empty = no token.
   std::string token;
 };
@@ -85,10 +91,14 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   ~ObjectDatabaseService() override;  // stop()
 
   // The sessions a stopped server left not ended (found by create()): open ones are marked
-  // INTERRUPTED, and those with a saved map are ended from it on the database thread. Call once
-  // the server listens: create() itself writes nothing, so a server that cannot start changes
-  // nothing. Errors: the store's; at the first, nothing more is marked or queued.
+  // INTERRUPTED, and those with a saved map are ended from it on the database thread; a session
+  // another live server holds the lease of is its own and left alone. Call once the server
+  // listens: create() itself writes nothing, so a server that cannot start changes nothing.
+  // Errors: the store's; at the first, nothing more is marked or queued. From then on the lease
+  // keeper takes over, the same way, every open session whose server stopped renewing its lease.
   Status startRecovery();
+  // This server's name as lease holder (ServiceOptions::server_id, or the one made up).
+  const std::string& serverId() const { return server_id_; }
 
   // After the gRPC server stopped (no call in flight): waits for the workers, then ends every
   // session that did not end (its map is stored; if that fails it is stored as interrupted) and
@@ -147,6 +157,27 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // Database thread, at start: a session a stopped server left not ended, with a saved map, gets
   // that map's segments inserted and its scene stored, and stays INTERRUPTED.
   Status recoverSession(const storage::SessionInfo& stored);
+  // Sessions of a stopped server (this one before a restart, or another whose lease expired):
+  // each that needs ending (open, or with a saved map) is leased, marked INTERRUPTED when open,
+  // and ended from its saved map on the database thread; the lease goes when that is done. A
+  // session whose lease another server holds is skipped. `at_start`: the sessions were
+  // announced as recovering by create().
+  Status takeOver(const std::vector<storage::SessionInfo>& unended, bool at_start);
+  // The lease keeper's thread: renews this server's leases every lease_ttl / 3, stops the
+  // sessions whose lease it lost, and takes over open sessions whose lease expired.
+  void keepLeases();
+  // Sessions whose lease this server holds no more (expired while the database was unreachable,
+  // taken by another server): their streams end and nothing more of them is written.
+  void leasesLost(const std::vector<std::string>& lost);
+  // Gives up the lease of `name` (its session ended, or its recovery is done).
+  void releaseLease(const std::string& name);
+  // The lease of a session about to be created. ALREADY_EXISTS when this server streams it
+  // already or another server holds its lease.
+  Status leaseNewSession(const std::string& name);
+  // The stored row of session `name` (NOT_FOUND when none).
+  StatusOr<storage::SessionInfo> sessionNamed(const std::string& name);
+  // ABORTED: the session's lease was lost.
+  static Status lostLease(const std::string& name);
   // The server's parameters with a stored session's own on top (the server's alone when they
   // cannot be applied).
   Params storedSessionParams(const storage::SessionInfo& stored) const;
@@ -206,6 +237,16 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   uint64_t inserts_ = 0;
   std::condition_variable janitor_wake_;  // with mutex_: stop() wakes the janitor
   std::thread janitor_;
+  // Leases (session_recovery.cpp). leased_ (under mutex_): the sessions whose lease this server
+  // holds; the keeper thread renews them.
+  std::string server_id_;
+  std::set<std::string> leased_;
+  bool recovery_started_ = false;  // startRecovery ran: the keeper may take sessions over
+  bool keeper_stop_ = false;       // stop() ended every session: the keeper's work is done
+  std::condition_variable keeper_wake_;  // with mutex_: stop() wakes the keeper
+  std::thread keeper_;
+  std::atomic<uint64_t> sessions_taken_over_{0};
+  std::atomic<uint64_t> leases_lost_{0};
   std::unique_ptr<JobQueue> database_queue_;  // last: its thread stops first
 };
 

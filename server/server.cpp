@@ -57,6 +57,15 @@ Status ServerOptions::validate() const {
         absl::StrFormat("save_map_every is %d ms, must be in [0, one day]",
                         static_cast<int64_t>(save_map_every.count())));
   }
+  if (lease_ttl < std::chrono::milliseconds(100) || lease_ttl > std::chrono::hours(1)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("lease_ttl is %d ms, must be in [100 ms, one hour]",
+                        static_cast<int64_t>(lease_ttl.count())));
+  }
+  if (server_id.size() > 200) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("server_id has %d characters, at most 200", server_id.size()));
+  }
   if (max_pending_events < 1 || max_pending_events > 65536) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "max_pending_events is %d, must be in [1, 65536]", max_pending_events));
@@ -98,6 +107,8 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   service_options.max_open_sessions = size_t(options.max_open_sessions);
   service_options.auto_end_after = options.auto_end_after;
   service_options.save_map_every = options.save_map_every;
+  service_options.server_id = options.server_id;
+  service_options.lease_ttl = options.lease_ttl;
   service_options.max_pending_events = size_t(options.max_pending_events);
   service_options.slow_reader_timeout = options.slow_reader_timeout;
   service_options.max_send_message_bytes = size_t(options.max_send_message_bytes);

@@ -72,6 +72,11 @@ struct ServerOptions {
   // An open session's map is saved this often, so that a crash loses only the frames after the
   // last save (the next start ends the session from it). 0 = never.
   std::chrono::milliseconds save_map_every{60 * 1000};
+  // Several servers on one database: this server's name as session lease holder (empty:
+  // host:pid:random), and how long a lease lasts without renewal before another server may take
+  // the session over (ServiceOptions::lease_ttl).
+  std::string server_id;
+  std::chrono::milliseconds lease_ttl{15 * 1000};
 
   // Checks every field; the message names the field and the bad value.
   Status validate() const;

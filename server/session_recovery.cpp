@@ -1,6 +1,8 @@
-// Ending, at start, the sessions a stopped server left open (RELIABILITY.md R2): each open
-// session is marked interrupted; one with a saved map is ended from it on the database thread
-// (its segments inserted, its scene stored), while the server already serves.
+// Ending the sessions a stopped server left open (RELIABILITY.md R2): at start, this server's
+// own from before; later, those of another server on the same database whose lease expired.
+// Each open session is marked interrupted; one with a saved map is ended from it on the database
+// thread (its segments inserted, its scene stored), while the server already serves. The lease
+// keeper renews this server's session leases, and gives up the sessions whose lease it lost.
 #include <cmath>
 
 #include "absl/strings/str_format.h"
@@ -9,6 +11,7 @@
 #include "core/database/object_database.h"
 #include "server/job_queue.h"
 #include "server/object_database_service.h"
+#include "server/ingest_stream.h"
 #include "server/session/live_session.h"
 
 namespace objdb::server {
@@ -16,17 +19,66 @@ namespace objdb::server {
 Status ObjectDatabaseService::startRecovery() {
   std::vector<storage::SessionInfo> unended;
   unended.swap(unended_);
+  const Status status = takeOver(unended, /*at_start=*/true);
+  {
+    std::lock_guard lock(mutex_);
+    recovery_started_ = true;
+  }
+  keeper_wake_.notify_all();
+  return status;
+}
+
+Status ObjectDatabaseService::takeOver(const std::vector<storage::SessionInfo>& unended,
+                                       bool at_start) {
   // Those with a saved map are ended from it (on the database thread, while the server serves);
   // the others lost their maps. At the first store error nothing more is written.
   std::vector<storage::SessionInfo> queued;
   Status status = absl::OkStatus();
-  for (const auto& s : unended) {
-    auto saved_frames = store_->savedMapFrames(s.name);
+  for (const auto& listed : unended) {
+    auto saved_frames = store_->savedMapFrames(listed.name);
     status = saved_frames.status();
-    if (status.ok() && s.state == storage::SessionState::kOpen) {
+    if (status.ok() && listed.state != storage::SessionState::kOpen && *saved_frames < 0) {
+      continue;  // nothing left to do for it
+    }
+    StatusOr<std::string> holder = status.ok() ? store_->acquireLease(listed.name, server_id_,
+                                                                      options_.lease_ttl)
+                                               : StatusOr<std::string>(status);
+    status = holder.status();
+    if (status.ok() && *holder != server_id_) {
+      logger("server")->info("session {} is not ended and server {} holds its lease: left to it",
+                             listed.name, *holder);
+      continue;
+    }
+    if (status.ok()) {
+      std::lock_guard lock(mutex_);
+      leased_.insert(listed.name);
+    }
+    // Under the lease, the session as it is now: its server may have ended it since the list
+    // was read (and then given its lease up).
+    storage::SessionInfo s = listed;
+    if (status.ok()) {
+      auto now = sessionNamed(listed.name);
+      status = now.status();
+      if (status.ok()) s = *now;
+    }
+    if (status.ok()) {
+      saved_frames = store_->savedMapFrames(s.name);
+      status = saved_frames.status();
+    }
+    const bool open = s.state == storage::SessionState::kOpen;
+    if (status.ok() && (s.state == storage::SessionState::kEnded || (!open && *saved_frames < 0))) {
+      releaseLease(s.name);
+      continue;
+    }
+    if (status.ok() && *saved_frames >= 0) {
+      // Queries of it wait (UNAVAILABLE) until it is ended from its saved map.
+      std::lock_guard lock(mutex_);
+      recovering_.insert(s.name);
+    }
+    if (status.ok() && open) {
       if (*saved_frames < 0) {
-        logger("server")->warn("session {} was still open when the server last stopped and has "
-                               "no saved map; its map is lost (segments inserted before stay): "
+        logger("server")->warn("session {} was still open when its server stopped and has no "
+                               "saved map; its map is lost (segments inserted before stay): "
                                "marking it interrupted",
                                s.name);
       }
@@ -35,17 +87,41 @@ Status ObjectDatabaseService::startRecovery() {
     }
     if (!status.ok()) {
       status = annotate(status, absl::StrFormat("session %s", s.name));
+      queued.push_back(s);
+      {
+        std::lock_guard lock(mutex_);
+        for (const auto& q : queued) recovering_.erase(q.name);
+      }
+      for (const auto& q : queued) releaseLease(q.name);
       queued.clear();
       break;
     }
-    if (*saved_frames >= 0) queued.push_back(s);
+    if (!at_start) sessions_taken_over_.fetch_add(1);
+    if (*saved_frames >= 0) {
+      queued.push_back(s);
+    } else {
+      releaseLease(s.name);
+    }
   }
   {
     std::lock_guard lock(mutex_);
-    for (const auto& s : unended) recovering_.erase(s.name);
+    if (at_start) {  // announced by create(): those not queued are not being recovered
+      for (const auto& s : unended) recovering_.erase(s.name);
+    }
     for (const auto& s : queued) recovering_.insert(s.name);
   }
   for (const auto& s : queued) {
+    if (!at_start) {
+      logger("server")->warn("session {}: its server stopped renewing its lease; taking it over",
+                             s.name);
+    }
+    std::unique_lock lock(mutex_);
+    if (keeper_stop_) {  // the server is stopping: left to the next server
+      recovering_.erase(s.name);
+      lock.unlock();
+      releaseLease(s.name);
+      continue;
+    }
     database_queue_->push([this, s] {
       const Status recovered = recoverSession(s);
       if (!recovered.ok()) {
@@ -53,11 +129,142 @@ Status ObjectDatabaseService::startRecovery() {
                                 "at the next start): {}",
                                 s.name, std::string(recovered.message()));
       }
-      std::lock_guard lock(mutex_);
-      recovering_.erase(s.name);
+      {
+        std::lock_guard lock(mutex_);
+        recovering_.erase(s.name);
+      }
+      releaseLease(s.name);
     });
   }
   return status;
+}
+
+StatusOr<storage::SessionInfo> ObjectDatabaseService::sessionNamed(const std::string& name) {
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+  for (const auto& s : stored) {
+    if (s.name == name) return s;
+  }
+  return absl::NotFoundError(absl::StrFormat("no session %s", name));
+}
+
+Status ObjectDatabaseService::leaseNewSession(const std::string& name) {
+  {
+    std::lock_guard lock(mutex_);
+    if (leased_.count(name) != 0 || sessions_.count(name) != 0 || recovering_.count(name) != 0) {
+      return absl::AlreadyExistsError(absl::StrFormat("session %s already exists", name));
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(const std::string holder,
+                         store_->acquireLease(name, server_id_, options_.lease_ttl));
+  if (holder != server_id_) {
+    return absl::AlreadyExistsError(absl::StrFormat(
+        "session %s already exists: server %s streams it (or ends it)", name, holder));
+  }
+  std::lock_guard lock(mutex_);
+  if (!leased_.insert(name).second) {  // a second header of this name, at the same time
+    return absl::AlreadyExistsError(absl::StrFormat("session %s already exists", name));
+  }
+  return absl::OkStatus();
+}
+
+Status ObjectDatabaseService::lostLease(const std::string& name) {
+  return absl::AbortedError(absl::StrFormat(
+      "session %s: this server lost its lease (the database was unreachable for longer than the "
+      "lease's time to live); another server may have taken it over, so nothing more of it is "
+      "written here",
+      name));
+}
+
+void ObjectDatabaseService::releaseLease(const std::string& name) {
+  {
+    std::lock_guard lock(mutex_);
+    if (leased_.erase(name) == 0) return;
+  }
+  if (Status released = store_->releaseLease(name, server_id_); !released.ok()) {
+    // It expires on its own; until then no other server takes the session over.
+    logger("server")->warn("session {}: could not give up its lease: {}", name,
+                           std::string(released.message()));
+  }
+}
+
+void ObjectDatabaseService::keepLeases() {
+  const auto period = std::max<std::chrono::milliseconds>(std::chrono::milliseconds(20),
+                                                          options_.lease_ttl / 3);
+  auto renewed_at = std::chrono::steady_clock::now();
+  std::unique_lock lock(mutex_);
+  while (!keeper_stop_) {
+    keeper_wake_.wait_for(lock, period);
+    if (keeper_stop_) break;
+    // Once stopping, leases are still renewed (stop() ends the sessions), but none taken over.
+    const bool takeovers = recovery_started_ && !stopped_;
+    const std::set<std::string> leased = leased_;
+    lock.unlock();
+    // Renewal first: a lease that lapsed (the database was unreachable for a whole time to live)
+    // may be another server's by now.
+    std::vector<std::string> lost;
+    auto held = store_->renewLeases(server_id_, options_.lease_ttl);
+    const auto now = std::chrono::steady_clock::now();
+    if (held.ok()) {
+      renewed_at = now;
+      const std::set<std::string> kept(held->begin(), held->end());
+      for (const auto& name : leased) {
+        if (kept.count(name) == 0) lost.push_back(name);
+      }
+    } else {
+      logger("server")->warn("session leases could not be renewed: {}",
+                             std::string(held.status().message()));
+      if (now - renewed_at >= options_.lease_ttl) lost.assign(leased.begin(), leased.end());
+    }
+    if (!lost.empty()) leasesLost(lost);
+    // Open sessions no server renews the lease of: their server stopped.
+    std::vector<storage::SessionInfo> orphans;
+    if (takeovers && held.ok()) {
+      auto stored = store_->sessions();
+      if (stored.ok()) {
+        std::lock_guard guard(mutex_);
+        for (const auto& s : *stored) {
+          if (s.state == storage::SessionState::kOpen && sessions_.count(s.name) == 0 &&
+              leased_.count(s.name) == 0 && recovering_.count(s.name) == 0) {
+            orphans.push_back(s);
+          }
+        }
+      }
+    }
+    if (!orphans.empty()) {
+      if (Status taken = takeOver(orphans, /*at_start=*/false); !taken.ok()) {
+        logger("server")->warn("taking over sessions of a stopped server: {}",
+                               std::string(taken.message()));
+      }
+    }
+    lock.lock();
+  }
+}
+
+void ObjectDatabaseService::leasesLost(const std::vector<std::string>& lost) {
+  for (const auto& name : lost) {
+    leases_lost_.fetch_add(1);
+    std::shared_ptr<LiveSession> session;
+    {
+      std::lock_guard lock(mutex_);
+      leased_.erase(name);
+      if (const auto it = sessions_.find(name); it != sessions_.end()) session = it->second;
+    }
+    logger("server")->error("session {}: this server lost its lease (not renewed in time; another "
+                            "server may take the session over): it writes nothing more of it",
+                            name);
+    if (session == nullptr) continue;
+    std::shared_ptr<IngestStream> stream;
+    {
+      std::lock_guard lock(session->mutex);
+      session->lease_lost = true;
+      stream = session->stream.lock();
+    }
+    if (stream != nullptr) {
+      std::lock_guard lock(stream->mutex);
+      stream->cancelled = true;
+      stream->changed.notify_all();
+    }
+  }
 }
 
 Params ObjectDatabaseService::storedSessionParams(const storage::SessionInfo& stored) const {

@@ -4,6 +4,7 @@
 // storage/sqlite/ (SqliteStore, one embedded file); storage/open_store.h opens one.
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -144,6 +145,21 @@ class Store : public database::ModelStore {
   virtual StatusOr<SessionInfo> beginSession(const SessionInfo& info) = 0;
   virtual Status finishSession(const std::string& name, SessionState state, int64_t frames) = 0;
   virtual StatusOr<std::vector<SessionInfo>> sessions() const = 0;
+
+  // Session leases (several servers on one database): the server streaming or ending a session
+  // holds its lease, renewed by heartbeats; a lease not renewed within its time to live expires,
+  // and another server may then take the session over. acquireLease grants `owner` the lease of
+  // `session` for `ttl` when no one holds it, it expired, or `owner` holds it already, and
+  // returns the holder after the call (`owner` when granted). A lease may come before its
+  // session's row (a server leases a name before it creates the session).
+  virtual StatusOr<std::string> acquireLease(const std::string& session, const std::string& owner,
+                                             std::chrono::milliseconds ttl) = 0;
+  // Renews every lease `owner` holds that has not expired, for `ttl`; returns those sessions
+  // (a session missing from the answer is no longer this owner's: it must stop writing it).
+  virtual StatusOr<std::vector<std::string>> renewLeases(const std::string& owner,
+                                                         std::chrono::milliseconds ttl) = 0;
+  // Gives up `owner`'s lease of `session` (nothing when it does not hold it).
+  virtual Status releaseLease(const std::string& session, const std::string& owner) = 0;
 
   // The engine's integrity check plus every blob's checks.
   virtual StatusOr<CheckReport> check() const = 0;

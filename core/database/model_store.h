@@ -69,9 +69,42 @@ struct MatchEntries {
 
 MatchEntry matchEntryOf(const model::ObjectModel& model);
 
+// The exclusive right to change a shared store's models, held while it lives
+// (ModelStore::lockWriter).
+class WriterLock {
+ public:
+  virtual ~WriterLock() = default;
+};
+
+// What other writers changed in a shared store (ModelStore::modelChangesSince).
+struct ModelChanges {
+  int64_t seq = 0;                  // the store's change sequence after these changes
+  std::vector<MatchEntry> entries;  // models changed that are active now, ascending id
+  std::vector<int64_t> retired;     // models changed that are no longer active (merged, removed)
+  std::vector<Status> skipped;      // changed models that could not be read, with the reason
+};
+
 class ModelStore {
  public:
   virtual ~ModelStore() = default;
+
+  // Several writers on one store (several servers on one PostgreSQL database): every change to
+  // the models happens under the writer lock, which the store hands to one writer at a time
+  // across every process; each change advances the store's change sequence, and a writer that
+  // takes the lock catches up on the changes since its last (modelChangesSince) before it
+  // matches. A store with one writer (the defaults, SQLite: one process owns the file) returns
+  // no lock, and a writer's own changes are all there are.
+  virtual StatusOr<std::unique_ptr<WriterLock>> lockWriter() {
+    return std::unique_ptr<WriterLock>();
+  }
+  // The change sequence now (read under the writer lock: the last change made).
+  virtual StatusOr<int64_t> modelChangeSeq() const { return int64_t{0}; }
+  // The models changed after sequence number `seq`.
+  virtual StatusOr<ModelChanges> modelChangesSince(int64_t seq) const {
+    ModelChanges none;
+    none.seq = seq;
+    return none;
+  }
 
   // Stores a raw segment, replacing an earlier one with the same key.
   virtual Status putRawSegment(const RawSegmentRecord& segment) = 0;

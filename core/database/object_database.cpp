@@ -29,7 +29,12 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
   OBJDB_RETURN_IF_ERROR(params.validate());
   if (store == nullptr) return absl::InvalidArgumentError("object database: no store given");
   std::unique_ptr<ObjectDatabase> db(new ObjectDatabase(params, store));
-  // Which model holds which segment, from the store (a reopened database carries on).
+  // Which model holds which segment, from the store (a reopened database carries on); on a
+  // shared store under the writer lock, so that the change sequence matches the entries.
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_ptr<WriterLock> writer, store->lockWriter());
+  if (writer != nullptr) {
+    OBJDB_ASSIGN_OR_RETURN(db->applied_seq_, store->modelChangeSeq());
+  }
   OBJDB_ASSIGN_OR_RETURN(const MatchEntries entries, store->matchEntries());
   std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> matchable;
   for (const auto& e : entries.entries) {
@@ -139,7 +144,7 @@ StatusOr<float> ObjectDatabase::growInScene(const std::string& session,
 }
 
 Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_id) {
-  OBJDB_ASSIGN_OR_RETURN(auto held, store_->model(model_id));
+  OBJDB_ASSIGN_OR_RETURN(auto held, loadModel(model_id));
   std::vector<model::Observation> remaining;
   for (const auto& o : held->observations) {
     if (keyOf(o) != key) remaining.push_back(o);
@@ -160,7 +165,7 @@ Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_i
   return absl::OkStatus();
 }
 
-StatusOr<int64_t> ObjectDatabase::withdrawSegment(const std::string& session, gsm::Label label) {
+StatusOr<int64_t> ObjectDatabase::withdrawLocked(const std::string& session, gsm::Label label) {
   const SegmentKey key{session, label};
   const auto it = segment_model_.find(key);
   if (it == segment_model_.end()) return int64_t{0};
@@ -169,9 +174,26 @@ StatusOr<int64_t> ObjectDatabase::withdrawSegment(const std::string& session, gs
   return model_id;
 }
 
+StatusOr<std::shared_ptr<const model::ObjectModel>> ObjectDatabase::loadModel(int64_t id) {
+  {
+    std::lock_guard lock(mutex_);
+    for (auto it = models_.begin(); it != models_.end(); ++it) {
+      if ((*it)->id != id) continue;
+      models_.splice(models_.begin(), models_, it);
+      return models_.front();
+    }
+  }
+  OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<const model::ObjectModel> loaded, store_->model(id));
+  std::lock_guard lock(mutex_);
+  models_.push_front(loaded);
+  if (models_.size() > kCachedModels) models_.pop_back();
+  return loaded;
+}
+
 void ObjectDatabase::changed(int64_t model_id, std::optional<MatchEntry> entry) {
   std::lock_guard lock(mutex_);
   indices_.erase(model_id);
+  models_.remove_if([&](const auto& m) { return m->id == model_id; });
   if (entry && entry->matchable(params_.model)) {
     prefilter_.put(model_id, entry->descriptors);
   } else {
@@ -395,7 +417,7 @@ Status ObjectDatabase::absorbCoAccepted(
   return absl::OkStatus();
 }
 
-StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
+StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
                                                      const gsm::RawSegment& segment,
                                                      const LiveScenes& live) {
   const auto start = Clock::now();
@@ -459,7 +481,7 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
     t = Clock::now();
     candidates.reserve(ranked.size());
     for (int64_t id : ranked) {
-      auto candidate = store_->model(id);
+      auto candidate = loadModel(id);
       if (!candidate.ok()) {
         // A damaged model costs its own matches only; the insert carries on without it.
         ++report.unreadable_candidates;

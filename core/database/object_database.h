@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -60,6 +61,9 @@ struct InsertTimings {
   // upkeep and votes), loading the candidates, storing the result (a merged model's rebuild
   // included).
   double replace_ms = 0, prefilter_ms = 0, load_ms = 0, store_ms = 0;
+  // Several writers on one store: waiting for the writer lock and catching up on the others'
+  // changes (0 with one writer); not in total_ms, which is the time under the lock.
+  double writer_wait_ms = 0;
 
   InsertTimings& operator+=(const InsertTimings& o) {
     cloud_ms += o.cloud_ms;
@@ -73,6 +77,7 @@ struct InsertTimings {
     prefilter_ms += o.prefilter_ms;
     load_ms += o.load_ms;
     store_ms += o.store_ms;
+    writer_wait_ms += o.writer_wait_ms;
     return *this;
   }
 };
@@ -107,8 +112,10 @@ struct InsertReport {
 
 class ObjectDatabase {
  public:
-  // Params are validated. The store outlives the database, and the database is its only writer
-  // (it keeps the prefilter's entries of every model in memory, loaded here).
+  // Params are validated. The store outlives the database. The database keeps the prefilter's
+  // entries of every model in memory, loaded here; it is the store's only writer, or, on a store
+  // with several (ModelStore::lockWriter), it catches up on the others' changes each time it
+  // takes the writer lock, before it matches (object_database_sync.cpp).
   static StatusOr<std::unique_ptr<ObjectDatabase>> create(const Params& params, ModelStore* store);
 
   // Algorithm 1 for one raw segment of `session`. A segment whose (session, label) was inserted
@@ -153,6 +160,9 @@ class ObjectDatabase {
                           const std::vector<std::shared_ptr<const model::ObjectModel>>& loaded,
                           const LiveScenes& live, InsertReport* report);
   std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);
+  // Model `id` decoded: from the cache of the kCachedModels most recently loaded (candidates
+  // recur: every insert of a repeated object meets the same models), else from the store.
+  StatusOr<std::shared_ptr<const model::ObjectModel>> loadModel(int64_t id);
   // A model this database added, replaced (entry given) or removed (no entry): drops its cached
   // index and updates the prefilter's entries.
   void changed(int64_t model_id, std::optional<MatchEntry> entry);
@@ -161,10 +171,25 @@ class ObjectDatabase {
   ModelStore* store_;
   std::mutex mutex_;  // guards the caches below
   std::map<int64_t, std::shared_ptr<const matching::DescriptorIndex>> indices_;
+  // Decoded models, most recently used first; a model's entry goes when it changes (changed()).
+  static constexpr size_t kCachedModels = 32;
+  std::list<std::shared_ptr<const model::ObjectModel>> models_;
   std::map<SegmentKey, int64_t> segment_model_;  // which model holds each segment
   // The prefilter's descriptors of every matchable stored model, updated by every change this
-  // database makes (it is the store's only writer): no store reads and no rebuild per insert.
+  // database makes and by the changes other writers made (no rebuild per insert).
   PrefilterIndex prefilter_;
+
+  // Several writers (object_database_sync.cpp). insertSegment and withdrawSegment run their
+  // *Locked body under the store's writer lock, taken by beginWrite, which first applies the
+  // changes other writers made since applied_seq_; endWrite records the sequence after this
+  // database's own changes.
+  StatusOr<std::unique_ptr<WriterLock>> beginWrite();
+  void endWrite(const WriterLock* lock);
+  void applyChanges(const ModelChanges& changes);
+  StatusOr<InsertReport> insertLocked(const std::string& session, const gsm::RawSegment& segment,
+                                      const LiveScenes& live);
+  StatusOr<int64_t> withdrawLocked(const std::string& session, gsm::Label label);
+  int64_t applied_seq_ = 0;
 };
 
 }  // namespace objdb::database

@@ -72,6 +72,9 @@ struct LiveSession {
   std::weak_ptr<IngestStream> stream;
   std::chrono::steady_clock::time_point stream_gone;  // when `streaming` became false
   bool end_queued = false;  // the server queued its own end (idle too long, or stopping)
+  // This server no longer holds the session's lease (another may have taken it over): nothing
+  // more of it is written.
+  bool lease_lost = false;
   // Database jobs to queue when the frame worker is done (EndSession of an interrupted stream).
   std::vector<std::function<void()>> after_stream;
   // The newest map snapshot handed to the database (with the last extracted segments): the
@@ -92,6 +95,10 @@ struct LiveSession {
   bool ended() {
     std::lock_guard lock(mutex);
     return state == v1::SESSION_STATE_ENDED;
+  }
+  bool leaseLost() {
+    std::lock_guard lock(mutex);
+    return lease_lost;
   }
   std::shared_ptr<const tsdf::TsdfLayer> currentScene() {
     std::lock_guard lock(mutex);

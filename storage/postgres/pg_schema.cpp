@@ -142,6 +142,21 @@ CREATE INDEX merge_records_by_target ON merge_records(target);
 INSERT INTO objdb_meta(key, value) VALUES ('application', 'objdb'), ('schema_version', '0');
 )sql";
 
+// Version 2: several servers on one database. Session leases (the server streaming or ending a
+// session; expiry by the database's clock, so the servers' clocks do not matter), and a change
+// sequence on models: every write of a model row takes the next number, so that a server
+// catches up on the models the others changed (ModelStore::modelChangesSince).
+constexpr const char* kSchemaV2 = R"sql(
+CREATE TABLE session_leases (
+  session TEXT PRIMARY KEY,
+  owner TEXT NOT NULL,
+  expires_at TIMESTAMPTZ NOT NULL
+);
+CREATE SEQUENCE model_changes;
+ALTER TABLE models ADD COLUMN change_seq BIGINT NOT NULL DEFAULT 0;
+CREATE INDEX models_by_change ON models(change_seq);
+)sql";
+
 // Serialises schema preparation across servers (pg_advisory_xact_lock key: "OBJD").
 constexpr int64_t kSchemaLock = 0x4F424A44;
 
@@ -189,6 +204,7 @@ StatusOr<int> recordedVersion(const Connection& c, const std::string& describe) 
 const std::vector<Migration>& schemaMigrations() {
   static const std::vector<Migration> migrations = {
       {1, "sessions, maps, raw segments, models, observations, merge records", kSchemaV1},
+      {2, "several servers: session leases, the models' change sequence", kSchemaV2},
   };
   return migrations;
 }

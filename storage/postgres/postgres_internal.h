@@ -5,6 +5,8 @@
 
 #include <cstdint>
 #include <functional>
+#include <mutex>
+#include <optional>
 #include <string>
 
 #include "core/common/status.h"
@@ -19,6 +21,7 @@ class PostgresStore::Impl {
  public:
   Impl(const std::string& uri, const std::string& describe, const PostgresStoreOptions& options)
       : options(options),
+        uri(uri),
         pool(uri, describe, options.pool_size, options.connect_timeout_s),
         scenes(size_t(options.max_cached_scenes)) {}
 
@@ -35,8 +38,13 @@ class PostgresStore::Impl {
   }
 
   const PostgresStoreOptions options;
+  const std::string uri;
   pg::ConnectionPool pool;
   SceneCache scenes;
+  // The writer lock (postgres_fleet.cpp): one holder in this process at a time, and a session
+  // advisory lock on `writer` across processes.
+  std::mutex writer_mutex;
+  std::optional<pg::Connection> writer;
 };
 
 namespace pgstore {

@@ -18,6 +18,9 @@ using pg::Result;
 
 namespace {
 
+// Every write of a model row takes the next number of the change sequence (schema 2).
+constexpr const char* kNextChange = "nextval('model_changes')";
+
 // addModelColumns adds kModelColumns (row_codec.h) in their order.
 
 void addModelColumns(Params* p, const EncodedModel& e) {
@@ -78,9 +81,9 @@ Status retireModel(const pg::Connection& c, int64_t id, int64_t merged_into) {
   OBJDB_ASSIGN_OR_RETURN(
       Result r, c.exec(absl::StrFormat("UPDATE models SET state = $1, merged_into = $2::bigint, "
                                        "grid = NULL, surface_voxels = NULL, cloud = NULL, "
-                                       "keypoints = NULL, descriptors = NULL, updated_at = %s "
-                                       "WHERE id = $3 AND state = 'active'",
-                                       pg::kNow),
+                                       "keypoints = NULL, descriptors = NULL, updated_at = %s, "
+                                       "change_seq = %s WHERE id = $3 AND state = 'active'",
+                                       pg::kNow, kNextChange),
                        p, "retiring the model"));
   if (r.affected() == 0) {
     return absl::NotFoundError(absl::StrFormat("no object model %d to %s", id,
@@ -105,9 +108,10 @@ Status rewriteModel(const pg::Connection& c, const EncodedModel& e, int64_t id,
   addModelColumns(&p, e);
   p.add(id);
   OBJDB_ASSIGN_OR_RETURN(
-      Result r, c.exec(absl::StrFormat("UPDATE models SET %supdated_at = %s WHERE id = $%d AND "
-                                       "state = 'active'",
-                                       assignments, pg::kNow, kNumModelColumns + 1),
+      Result r, c.exec(absl::StrFormat("UPDATE models SET %supdated_at = %s, change_seq = %s "
+                                       "WHERE id = $%d AND state = 'active'",
+                                       assignments, pg::kNow, kNextChange,
+                                       kNumModelColumns + 1),
                        p, "rewriting the model"));
   if (r.affected() == 0) {
     return absl::NotFoundError(absl::StrFormat("no object model %d to replace", id));
@@ -135,10 +139,11 @@ StatusOr<int64_t> PostgresStore::addModel(model::ObjectModel model) {
     Params p;
     addModelColumns(&p, e);
     OBJDB_ASSIGN_OR_RETURN(
-        Result r, c.exec(absl::StrFormat("INSERT INTO models(%s, state, created_at, updated_at) "
-                                         "VALUES (%s, 'active', %s, %s) RETURNING id",
+        Result r, c.exec(absl::StrFormat("INSERT INTO models(%s, state, created_at, updated_at, "
+                                         "change_seq) VALUES (%s, 'active', %s, %s, %s) "
+                                         "RETURNING id",
                                          kModelColumns, placeholders(1, kNumModelColumns),
-                                         pg::kNow, pg::kNow),
+                                         pg::kNow, pg::kNow, kNextChange),
                          p, "inserting the models row"));
     id = r.integer(0, 0);
     return writeObservations(c, id, e, /*replace=*/false);
@@ -315,41 +320,95 @@ StatusOr<std::vector<int64_t>> PostgresStore::modelIds() const {
   return ids;
 }
 
+namespace {
+
+// The prefilter entries of the active models changed after change `since` (0: every active
+// model), inside the caller's read snapshot; `retired` (when given) gets the models changed
+// after it that are no longer active.
+Status readMatchEntries(const pg::Connection& c, int64_t since, database::MatchEntries* out,
+                        std::vector<int64_t>* retired) {
+  Params p;
+  p.add(since);
+  if (retired != nullptr) {
+    OBJDB_ASSIGN_OR_RETURN(Result r, c.exec("SELECT id FROM models WHERE change_seq >= $1 AND "
+                                            "state <> 'active' ORDER BY id",
+                                            p, "reading model changes"));
+    for (int row = 0; row < r.rows(); ++row) retired->push_back(r.integer(row, 0));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Result s, c.exec("SELECT id, planar, num_points, num_keypoints, descriptors, structure "
+                       "FROM models WHERE state = 'active' AND change_seq >= $1 ORDER BY id",
+                       p, "reading match entries"));
+  std::map<int64_t, size_t> slot;
+  for (int row = 0; row < s.rows(); ++row) {
+    database::MatchEntry e;
+    e.id = s.integer(row, 0);
+    e.planar = s.boolean(row, 1);
+    e.structure = s.boolean(row, 5);
+    e.num_points = size_t(s.integer(row, 2));
+    e.num_keypoints = size_t(s.integer(row, 3));
+    auto descriptors = decodeDescriptors(s.bytes(row, 4));
+    if (!descriptors.ok()) {
+      out->skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
+      if (retired != nullptr) retired->push_back(e.id);  // its earlier entry is stale
+      continue;
+    }
+    e.descriptors = std::move(*descriptors);
+    slot[e.id] = out->entries.size();
+    out->entries.push_back(std::move(e));
+  }
+  OBJDB_ASSIGN_OR_RETURN(
+      Result o, c.exec("SELECT o.model_id, s.name, o.label FROM observations o "
+                       "JOIN sessions s ON s.id = o.session_id JOIN models m ON "
+                       "m.id = o.model_id WHERE m.state = 'active' AND m.change_seq >= $1 "
+                       "ORDER BY o.model_id, o.seq",
+                       p, "reading match entries"));
+  for (int row = 0; row < o.rows(); ++row) {
+    const auto it = slot.find(o.integer(row, 0));
+    if (it == slot.end()) continue;
+    out->entries[it->second].segments.push_back({o.text(row, 1), uint32_t(o.integer(row, 2))});
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 StatusOr<database::MatchEntries> PostgresStore::matchEntries() const {
   database::MatchEntries out;
-  OBJDB_RETURN_IF_ERROR(impl_->read("reading match entries", [&](const pg::Connection& c)
+  OBJDB_RETURN_IF_ERROR(impl_->read("reading match entries", [&](const pg::Connection& c) {
+    out = {};
+    return readMatchEntries(c, 0, &out, nullptr);
+  }));
+  return out;
+}
+
+StatusOr<int64_t> PostgresStore::modelChangeSeq() const {
+  int64_t seq = 0;
+  OBJDB_RETURN_IF_ERROR(impl_->read("reading the model change sequence",
+                                    [&](const pg::Connection& c) -> Status {
+                                      OBJDB_ASSIGN_OR_RETURN(
+                                          Result r, c.exec("SELECT COALESCE(MAX(change_seq), 0) "
+                                                           "FROM models",
+                                                           "reading the change sequence"));
+                                      seq = r.integer(0, 0);
+                                      return absl::OkStatus();
+                                    }));
+  return seq;
+}
+
+StatusOr<database::ModelChanges> PostgresStore::modelChangesSince(int64_t seq) const {
+  database::ModelChanges out;
+  OBJDB_RETURN_IF_ERROR(impl_->read("reading model changes", [&](const pg::Connection& c)
                                                                   -> Status {
     out = {};
-    OBJDB_ASSIGN_OR_RETURN(
-        Result s, c.exec("SELECT id, planar, num_points, num_keypoints, descriptors, structure "
-                         "FROM models WHERE state = 'active' ORDER BY id",
-                         "reading match entries"));
-    std::map<int64_t, size_t> slot;
-    for (int row = 0; row < s.rows(); ++row) {
-      database::MatchEntry e;
-      e.id = s.integer(row, 0);
-      e.planar = s.boolean(row, 1);
-      e.structure = s.boolean(row, 5);
-      e.num_points = size_t(s.integer(row, 2));
-      e.num_keypoints = size_t(s.integer(row, 3));
-      auto descriptors = decodeDescriptors(s.bytes(row, 4));
-      if (!descriptors.ok()) {
-        out.skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
-        continue;
-      }
-      e.descriptors = std::move(*descriptors);
-      slot[e.id] = out.entries.size();
-      out.entries.push_back(std::move(e));
-    }
-    OBJDB_ASSIGN_OR_RETURN(
-        Result o, c.exec("SELECT o.model_id, s.name, o.label FROM observations o "
-                         "JOIN sessions s ON s.id = o.session_id ORDER BY o.model_id, o.seq",
-                         "reading match entries"));
-    for (int row = 0; row < o.rows(); ++row) {
-      const auto it = slot.find(o.integer(row, 0));
-      if (it == slot.end()) continue;
-      out.entries[it->second].segments.push_back({o.text(row, 1), uint32_t(o.integer(row, 2))});
-    }
+    OBJDB_ASSIGN_OR_RETURN(Result r, c.exec("SELECT COALESCE(MAX(change_seq), 0) FROM models",
+                                            "reading the change sequence"));
+    out.seq = std::max(seq, r.integer(0, 0));
+    if (out.seq == seq) return absl::OkStatus();
+    database::MatchEntries entries;
+    OBJDB_RETURN_IF_ERROR(readMatchEntries(c, seq + 1, &entries, &out.retired));
+    out.entries = std::move(entries.entries);
+    out.skipped = std::move(entries.skipped);
     return absl::OkStatus();
   }));
   return out;

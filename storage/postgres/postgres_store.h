@@ -100,6 +100,17 @@ class PostgresStore : public Store {
   StatusOr<SessionInfo> beginSession(const SessionInfo& info) override;
   Status finishSession(const std::string& name, SessionState state, int64_t frames) override;
   StatusOr<std::vector<SessionInfo>> sessions() const override;
+  // Several servers on one database (postgres_fleet.cpp): leases in table session_leases, timed
+  // by the database's clock; the writer lock is a PostgreSQL advisory lock on a connection of
+  // its own (released by the database if that connection or this process dies).
+  StatusOr<std::string> acquireLease(const std::string& session, const std::string& owner,
+                                     std::chrono::milliseconds ttl) override;
+  StatusOr<std::vector<std::string>> renewLeases(const std::string& owner,
+                                                 std::chrono::milliseconds ttl) override;
+  Status releaseLease(const std::string& session, const std::string& owner) override;
+  StatusOr<std::unique_ptr<database::WriterLock>> lockWriter() override;
+  StatusOr<int64_t> modelChangeSeq() const override;
+  StatusOr<database::ModelChanges> modelChangesSince(int64_t seq) const override;
   // Foreign keys and constraints are PostgreSQL's to enforce: the check decodes every blob, and
   // reports observations linked to a raw segment row of another session or label.
   StatusOr<CheckReport> check() const override;

@@ -99,4 +99,38 @@ StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {
   return out;
 }
 
+StatusOr<std::string> SqliteStore::acquireLease(const std::string& session,
+                                               const std::string& owner,
+                                               std::chrono::milliseconds ttl) {
+  if (owner.empty()) return absl::InvalidArgumentError("lease owner is empty");
+  const auto now = std::chrono::steady_clock::now();
+  std::lock_guard lock(lease_mutex_);
+  Lease& held = leases_[session];
+  if (held.owner.empty() || held.owner == owner || held.expires <= now) {
+    held = {owner, now + ttl};
+  }
+  return held.owner;
+}
+
+StatusOr<std::vector<std::string>> SqliteStore::renewLeases(const std::string& owner,
+                                                            std::chrono::milliseconds ttl) {
+  const auto now = std::chrono::steady_clock::now();
+  std::vector<std::string> held;
+  std::lock_guard lock(lease_mutex_);
+  for (auto& [session, lease] : leases_) {
+    if (lease.owner != owner || lease.expires <= now) continue;
+    lease.expires = now + ttl;
+    held.push_back(session);
+  }
+  return held;
+}
+
+Status SqliteStore::releaseLease(const std::string& session, const std::string& owner) {
+  std::lock_guard lock(lease_mutex_);
+  if (const auto it = leases_.find(session); it != leases_.end() && it->second.owner == owner) {
+    leases_.erase(it);
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace objdb::storage

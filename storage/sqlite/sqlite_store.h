@@ -9,6 +9,8 @@
 // file); schema.h holds the schema and its migrations, sqlite_util.h the thin SQLite C API layer.
 #pragma once
 
+#include <chrono>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -95,6 +97,13 @@ class SqliteStore : public Store {
   StatusOr<SessionInfo> beginSession(const SessionInfo& info) override;
   Status finishSession(const std::string& name, SessionState state, int64_t frames) override;
   StatusOr<std::vector<SessionInfo>> sessions() const override;
+  // Leases in memory: one process owns the file (FileRegistration), so one server holds them all
+  // and a lease never outlives it.
+  StatusOr<std::string> acquireLease(const std::string& session, const std::string& owner,
+                                     std::chrono::milliseconds ttl) override;
+  StatusOr<std::vector<std::string>> renewLeases(const std::string& owner,
+                                                 std::chrono::milliseconds ttl) override;
+  Status releaseLease(const std::string& session, const std::string& owner) override;
   // SQLite's integrity_check and foreign_key_check plus every blob's checks.
   StatusOr<CheckReport> check() const override;
   StatusOr<StoreStats> stats() const override;
@@ -145,6 +154,12 @@ class SqliteStore : public Store {
   // Decoded scene maps (large; read by every model-to-scene check), replaced on putScene; at most
   // options_.max_cached_scenes sessions.
   mutable SceneCache scene_cache_;
+  struct Lease {
+    std::string owner;
+    std::chrono::steady_clock::time_point expires;
+  };
+  std::mutex lease_mutex_;
+  std::map<std::string, Lease> leases_;  // by session name
 };
 
 }  // namespace objdb::storage

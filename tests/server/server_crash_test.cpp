@@ -6,6 +6,7 @@
 // answered) or interrupted (killed while streaming), never open. The server saves open
 // sessions' maps every 50 ms, so kills also land during saves, and a session killed after a
 // save is ended from its saved map at the next start.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -23,6 +24,7 @@
 
 #include "storage/sqlite/sqlite_store.h"
 #include "tests/server/ingest_fixtures.h"
+#include "tests/server/stored_objects.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/temp_dir.h"
 
@@ -190,19 +192,7 @@ TEST(ObjdbServerCrash, KilledWhileStreamingLosesNothingItReported) {
   for (int64_t id : ids) EXPECT_TRUE(store->model(id).ok()) << "model " << id;
   // An object a session reported is stored: active, or joined into another object later
   // (state merged), whose chain ends at an active one.
-  storage::ModelQuery all;
-  all.limit = 1000000;
-  all.include_merged = true;
-  std::map<int64_t, int64_t> merged_into;
-  for (const auto& m : store->modelSummaries(all).value()) {
-    if (m.state == "merged") merged_into[m.id] = m.merged_into;
-  }
-  for (uint64_t id : objects) {
-    int64_t holder = int64_t(id);
-    for (int hop = 0; hop < 100 && merged_into.count(holder); ++hop) holder = merged_into[holder];
-    EXPECT_TRUE(std::count(ids.begin(), ids.end(), holder) == 1)
-        << "object " << id << " (held by " << holder << ")";
-  }
+  EXPECT_THAT(testing::objectsNotHeld(*store, objects), ::testing::IsEmpty());
   ASSERT_FALSE(objects.empty());
   EXPECT_GT(recovered, 0) << "no killed session was ended from a saved map";
   std::printf("%zu kills; %zu objects of answered EndSessions, all stored; %d sessions ended "

@@ -451,7 +451,8 @@ TEST(PostgresStore, ConcurrentWritersOnTwoStoresAllLand) {
   EXPECT_EQ(b->modelIds().value(), std::vector<int64_t>(ids.begin(), ids.end()));
   EXPECT_EQ(a->stats().value().active_models, int64_t(kModels));
   size_t writer_sessions = 0;
-  for (const SessionInfo& s : b->sessions().value()) {
+  const std::vector<SessionInfo> listed = b->sessions().value();
+  for (const SessionInfo& s : listed) {
     writer_sessions += s.name.rfind("writer_", 0) == 0 ? 1 : 0;
   }
   EXPECT_EQ(writer_sessions, kModels);

@@ -33,6 +33,11 @@ class ChildProcess {
 
   // Collects output until `needle` occurs in stderr, both streams close or `timeout` passes.
   bool waitForStderr(const std::string& needle, std::chrono::milliseconds timeout);
+  // Reads the output that is there now, waiting at most `timeout` for some: a long-lived child
+  // that logs must be read from now and then, or it blocks on a full pipe.
+  void collect(std::chrono::milliseconds timeout = std::chrono::milliseconds(0)) {
+    (void)pump(timeout);
+  }
   // Sends `signal` to the child; false if it is no longer running.
   bool sendSignal(int signal);
   // Collects output until the child exits (killing it after `timeout`) and reaps it.

@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# The lounge through one objdb-server on SQLite and on PostgreSQL, in one run (issue 20's
+# overhead target: PostgreSQL within 1.5x of SQLite). Both are durable: SQLite synchronous=FULL
+# (the default), PostgreSQL fsync, full_page_writes and synchronous_commit on, on a throwaway
+# cluster (scripts/pg_test_cluster.sh) in /tmp. Prints the wall time of `objdb stream` (every
+# session streamed and ended) and the database stage from GetStats, per backend, and the ratio.
+# Usage: scripts/backend_bench.sh [DATASET]   (default data/lounge, generated when missing)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+BUILD_DIR=${BUILD_DIR:-build}
+OBJDB="$BUILD_DIR/bin/objdb"
+SERVER="$BUILD_DIR/bin/objdb-server"
+DATASET=${1:-data/lounge}
+[[ -x $OBJDB && -x $SERVER ]] || { echo "build first: scripts/build.sh" >&2; exit 1; }
+if [[ ! -d $DATASET ]]; then
+  [[ $DATASET == data/lounge ]] || { echo "no dataset $DATASET" >&2; exit 1; }
+  "$OBJDB" sim --preset lounge --out "$DATASET" --overwrite >/dev/null
+fi
+
+work=$(mktemp -d /tmp/objdb-backends.XXXXXX)
+cluster="$work/cluster"
+mkdir -p "$cluster"
+cleanup() {
+  [[ -n ${SERVER_PID:-} ]] && kill -TERM "$SERVER_PID" 2>/dev/null || true
+  bash scripts/pg_test_cluster.sh stop "$cluster" >/dev/null 2>&1 || true
+  rm -rf "$work"
+}
+trap cleanup EXIT
+bash scripts/pg_test_cluster.sh start "$cluster" >/dev/null
+base_uri=$(<"$cluster/uri")
+psql "$base_uri" -XAtq -c "ALTER SYSTEM SET fsync = on" -c "ALTER SYSTEM SET full_page_writes = on" \
+  -c "ALTER SYSTEM SET synchronous_commit = on" -c "SELECT pg_reload_conf()" >/dev/null
+psql "$base_uri" -XAtq -c "CREATE DATABASE objdb_bench" >/dev/null
+pg_uri=${base_uri/\/postgres\?/\/objdb_bench?}
+
+# Runs the dataset through a server on $1; prints "stream_s db_s inserts writer_wait_s".
+run() {
+  local db=$1 log="$work/server.log" address=""
+  "$SERVER" --listen 127.0.0.1:0 --db "$db" >"$log" 2>&1 &
+  SERVER_PID=$!
+  for _ in $(seq 1 600); do
+    address=$(sed -n 's/.*listening on \([0-9.]*:[0-9]*\).*/\1/p' "$log" | head -n 1)
+    [[ -n $address ]] && break
+    kill -0 "$SERVER_PID" 2>/dev/null || { cat "$log" >&2; exit 1; }
+    sleep 0.1
+  done
+  [[ -n $address ]] || { echo "objdb-server did not start" >&2; cat "$log" >&2; exit 1; }
+  local start end
+  start=$(date +%s.%N)
+  "$OBJDB" stream --server "$address" "$DATASET" >"$work/stream.log" 2>&1 ||
+    { cat "$work/stream.log" >&2; exit 1; }
+  end=$(date +%s.%N)
+  "$OBJDB" remote stats --server "$address" >"$work/stats.txt"
+  kill -TERM "$SERVER_PID"
+  wait "$SERVER_PID" || true
+  SERVER_PID=""
+  python3 - "$start" "$end" "$work/stats.txt" <<'PY'
+import re, sys
+start, end = float(sys.argv[1]), float(sys.argv[2])
+m = re.search(r"inserts: (\d+), ([0-9.]+) s in the database stage, ([0-9.]+) s waiting",
+              open(sys.argv[3]).read())
+inserts, db, wait = (int(m[1]), float(m[2]), float(m[3])) if m else (0, float("nan"), float("nan"))
+print(f"{end - start:.1f} {db:.1f} {inserts} {wait:.2f}")
+PY
+}
+
+sqlite_db="$work/objects.sqlite"
+sqlite_result=$(run "$sqlite_db")
+postgres_result=$(run "$pg_uri")
+read -r s_stream s_db s_inserts s_wait <<<"$sqlite_result"
+read -r p_stream p_db p_inserts p_wait <<<"$postgres_result"
+echo "$(basename "$DATASET") through one objdb-server, $(nproc) cores (noisy: compare within a run)"
+printf '%-12s %12s %14s %9s %16s\n' backend "stream s" "database s" inserts "writer wait s"
+printf '%-12s %12s %14s %9s %16s\n' SQLite "$s_stream" "$s_db" "$s_inserts" "$s_wait"
+printf '%-12s %12s %14s %9s %16s\n' PostgreSQL "$p_stream" "$p_db" "$p_inserts" "$p_wait"
+python3 -c "import sys; s,p,sd,pd=map(float,sys.argv[1:]); print(f'PostgreSQL / SQLite: stream {p/s:.2f}x, database stage {pd/sd:.2f}x')" \
+  "$s_stream" "$p_stream" "$s_db" "$p_db"
