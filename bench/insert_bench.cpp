@@ -232,6 +232,16 @@ Status run(const Options& options) {
                 quantile(row.ms, 0.99), quantile(row.ms, 1.0), mean,
                 double(row.candidates) / double(row.ms.size()),
                 100.0 * double(row.merged) / double(row.ms.size()));
+    {
+      const database::InsertTimings& t = row.timings;
+      const double n = double(row.ms.size());
+      std::printf("%9s steps, mean ms: model build %.0f, prefilter %.0f, load %.0f, "
+                  "match + register %.0f, model check %.0f, scene check %.0f, store %.0f (merge "
+                  "rebuilds incl.)\n",
+                  "", (t.cloud_ms + t.keypoints_ms + t.descriptors_ms) / n, t.prefilter_ms / n,
+                  t.load_ms / n, t.match_register_ms / n, t.model_verify_ms / n,
+                  t.scene_verify_ms / n, t.store_ms / n);
+    }
     std::fflush(stdout);
     rows.push_back(std::move(row));
   }

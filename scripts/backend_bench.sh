@@ -4,7 +4,8 @@
 # (the default), PostgreSQL fsync, full_page_writes and synchronous_commit on, on a throwaway
 # cluster (scripts/pg_test_cluster.sh) in /tmp. Prints the wall time of `objdb stream` (every
 # session streamed and ended) and the database stage from GetStats, per backend, and the ratio.
-# Usage: scripts/backend_bench.sh [DATASET]   (default data/lounge, generated when missing)
+# Usage: [REPEATS=2] scripts/backend_bench.sh [DATASET]   (default data/lounge, generated when
+# missing); each repeat runs both backends, in alternating order.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -12,10 +13,12 @@ BUILD_DIR=${BUILD_DIR:-build}
 OBJDB="$BUILD_DIR/bin/objdb"
 SERVER="$BUILD_DIR/bin/objdb-server"
 DATASET=${1:-data/lounge}
+REPEATS=${REPEATS:-2}
 [[ -x $OBJDB && -x $SERVER ]] || { echo "build first: scripts/build.sh" >&2; exit 1; }
 if [[ ! -d $DATASET ]]; then
   [[ $DATASET == data/lounge ]] || { echo "no dataset $DATASET" >&2; exit 1; }
-  "$OBJDB" sim --preset lounge --out "$DATASET" --overwrite >/dev/null
+  echo "generating the lounge into $DATASET (objdb sim --preset lounge)"
+  "$OBJDB" sim --preset lounge --out "$DATASET" --overwrite >/dev/null 2>&1
 fi
 
 work=$(mktemp -d /tmp/objdb-backends.XXXXXX)
@@ -31,7 +34,6 @@ bash scripts/pg_test_cluster.sh start "$cluster" >/dev/null
 base_uri=$(<"$cluster/uri")
 psql "$base_uri" -XAtq -c "ALTER SYSTEM SET fsync = on" -c "ALTER SYSTEM SET full_page_writes = on" \
   -c "ALTER SYSTEM SET synchronous_commit = on" -c "SELECT pg_reload_conf()" >/dev/null
-psql "$base_uri" -XAtq -c "CREATE DATABASE objdb_bench" >/dev/null
 pg_uri=${base_uri/\/postgres\?/\/objdb_bench?}
 
 # Runs the dataset through a server on $1; prints "stream_s db_s inserts writer_wait_s".
@@ -65,14 +67,33 @@ print(f"{end - start:.1f} {db:.1f} {inserts} {wait:.2f}")
 PY
 }
 
-sqlite_db="$work/objects.sqlite"
-sqlite_result=$(run "$sqlite_db")
-postgres_result=$(run "$pg_uri")
-read -r s_stream s_db s_inserts s_wait <<<"$sqlite_result"
-read -r p_stream p_db p_inserts p_wait <<<"$postgres_result"
 echo "$(basename "$DATASET") through one objdb-server, $(nproc) cores (noisy: compare within a run)"
-printf '%-12s %12s %14s %9s %16s\n' backend "stream s" "database s" inserts "writer wait s"
-printf '%-12s %12s %14s %9s %16s\n' SQLite "$s_stream" "$s_db" "$s_inserts" "$s_wait"
-printf '%-12s %12s %14s %9s %16s\n' PostgreSQL "$p_stream" "$p_db" "$p_inserts" "$p_wait"
-python3 -c "import sys; s,p,sd,pd=map(float,sys.argv[1:]); print(f'PostgreSQL / SQLite: stream {p/s:.2f}x, database stage {pd/sd:.2f}x')" \
-  "$s_stream" "$p_stream" "$s_db" "$p_db"
+# Each repeat on a new database of each backend; the order alternates (SQLite first, then
+# PostgreSQL first), so that neither always runs on a cold machine.
+printf '%-12s %7s %12s %14s %9s %16s\n' backend repeat "stream s" "database s" inserts "writer wait s"
+declare -a s_streams=() p_streams=() s_dbs=() p_dbs=()
+for ((r = 1; r <= REPEATS; r++)); do
+  order=(sqlite postgres)
+  ((r % 2 == 0)) && order=(postgres sqlite)
+  for backend in "${order[@]}"; do
+    if [[ $backend == sqlite ]]; then
+      rm -f "$work/objects.sqlite"*
+      result=$(run "$work/objects.sqlite")
+      label=SQLite
+    else
+      psql "$base_uri" -XAtq -c "DROP DATABASE IF EXISTS objdb_bench" -c "CREATE DATABASE objdb_bench" >/dev/null
+      result=$(run "$pg_uri")
+      label=PostgreSQL
+    fi
+    read -r stream db inserts wait <<<"$result"
+    printf '%-12s %7d %12s %14s %9s %16s\n' "$label" "$r" "$stream" "$db" "$inserts" "$wait"
+    if [[ $backend == sqlite ]]; then s_streams+=("$stream"); s_dbs+=("$db"); else p_streams+=("$stream"); p_dbs+=("$db"); fi
+  done
+done
+python3 - "${s_streams[*]}" "${p_streams[*]}" "${s_dbs[*]}" "${p_dbs[*]}" <<'PY'
+import sys
+s, p, sd, pd = ([float(x) for x in a.split()] for a in sys.argv[1:])
+mean = lambda v: sum(v) / len(v)
+print(f"PostgreSQL / SQLite, mean of {len(s)} runs each: stream {mean(p) / mean(s):.2f}x, "
+      f"database stage {mean(pd) / mean(sd):.2f}x")
+PY

@@ -189,10 +189,15 @@ StatusOr<Connection> Connection::open(const std::string& target, const std::stri
     const std::string text = absl::StrFormat("connecting to %s: %s", describe, why);
     if (PQconnectionNeedsPassword(raw) || absl::StrContains(why, "authentication failed") ||
         absl::StrContains(why, "no password supplied") ||
-        absl::StrContains(why, "no pg_hba.conf entry")) {
+        absl::StrContains(why, "no pg_hba.conf entry") ||
+        // A role that does not exist is refused credentials, as a wrong password is.
+        (absl::StrContains(why, "role \"") && absl::StrContains(why, "does not exist"))) {
       return absl::UnauthenticatedError(text);
     }
-    if (absl::StrContains(why, "does not exist")) return absl::NotFoundError(text);
+    // The database named by the URI is not there (create it, or fix the name).
+    if (absl::StrContains(why, "database \"") && absl::StrContains(why, "does not exist")) {
+      return absl::NotFoundError(text);
+    }
     return absl::UnavailableError(text);
   }
   PQsetNoticeProcessor(raw, &logNotice, nullptr);

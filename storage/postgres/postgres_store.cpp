@@ -18,11 +18,15 @@ bool isPostgresTarget(const std::string& target) {
 }
 
 std::string redactPostgresUri(const std::string& uri) {
-  // postgresql://user:password@host/... and a password=... query parameter.
+  // postgresql://user:password@host/..., the password= and sslpassword= (client key passphrase)
+  // query parameters, and the same keywords in a keyword/value connection string.
   static const std::regex userinfo(R"(^(postgres(?:ql)?://[^:/?#@]*):[^@/?#]*@)");
-  static const std::regex query(R"(([?&]password=)[^&#]*)");
+  static const std::regex query(R"(([?&](?:ssl)?password=)[^&#]*)");
+  static const std::regex keyword(R"((^|\s)((?:ssl)?password\s*=\s*)('(?:[^'\\]|\\.)*'|[^\s']\S*))");
   std::string out = std::regex_replace(uri, userinfo, "$1:***@");
-  return std::regex_replace(out, query, "$1***");
+  out = std::regex_replace(out, query, "$1***");
+  if (out.rfind("postgres", 0) == 0) return out;
+  return std::regex_replace(out, keyword, "$1$2***");
 }
 
 Status PostgresStoreOptions::validate() const {

@@ -255,6 +255,24 @@ TEST(PostgresStore, ServersOpeningAtOnceMigrateOnce) {
   }
 }
 
+TEST(PostgresStore, AMissingDatabaseIsNotFoundAndAnUnknownRoleIsRefused) {
+  const auto cluster = objdb::testing::postgresClusterUri();
+  ASSERT_TRUE(cluster.ok()) << cluster.status();
+  auto missing =
+      PostgresStore::open(objdb::testing::postgresUriWithDatabase(*cluster, "no_such_database"));
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound) << missing.status();
+  EXPECT_THAT(missing.status().message(), HasSubstr("no_such_database"));
+  std::string stranger = *cluster;
+  const size_t at = stranger.find("objdb@");
+  ASSERT_NE(at, std::string::npos) << stranger;
+  stranger.replace(at, 6, "no_such_role@");
+  auto refused = PostgresStore::open(stranger);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kUnauthenticated) << refused.status();
+  EXPECT_THAT(refused.status().message(), HasSubstr("no_such_role"));
+}
+
 TEST(PostgresStore, AnUnreachableServerIsUnavailable) {
   auto plain =
       PostgresStore::open("postgresql://objdb@/x?host=/nonexistent-objdb-dir&connect_timeout=2");
@@ -286,6 +304,12 @@ TEST(PostgresStore, RedactPostgresUriHidesPasswords) {
        "postgresql://db/objdb?sslmode=require&password=***&application_name=x"},
       {"postgresql://objdb:secret@db/objdb?password=secret",
        "postgresql://objdb:***@db/objdb?password=***"},
+      // The passphrase of a client key (sslpassword), in a URI and in keyword/value form.
+      {"postgresql://objdb@db/objdb?sslcert=c.pem&sslkey=k.pem&sslpassword=secret",
+       "postgresql://objdb@db/objdb?sslcert=c.pem&sslkey=k.pem&sslpassword=***"},
+      {"host=db dbname=objdb password=secret sslpassword = 'sec ret'",
+       "host=db dbname=objdb password=*** sslpassword = ***"},
+      {"password='se\\'cret' host=db", "password=*** host=db"},
       // Nothing to hide: unchanged (a port is no password).
       {"postgresql://objdb@/objdb?host=/tmp/objdb-pg.abc&port=5433",
        "postgresql://objdb@/objdb?host=/tmp/objdb-pg.abc&port=5433"},
