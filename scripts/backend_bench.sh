@@ -81,7 +81,7 @@ for ((r = 1; r <= REPEATS; r++)); do
       result=$(run "$work/objects.sqlite")
       label=SQLite
     else
-      psql "$base_uri" -XAtq -c "DROP DATABASE IF EXISTS objdb_bench" -c "CREATE DATABASE objdb_bench" >/dev/null
+      PGOPTIONS="-c client_min_messages=warning" psql "$base_uri" -XAtq -c "DROP DATABASE IF EXISTS objdb_bench" -c "CREATE DATABASE objdb_bench" >/dev/null
       result=$(run "$pg_uri")
       label=PostgreSQL
     fi
