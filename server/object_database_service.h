@@ -1,7 +1,8 @@
 // objdb.v1.ObjectDatabase (DESIGN.md "Data flow", "Threads"): the server's sessions and the
 // queries over its database. The frame pipeline itself is server/session/live_session.h, the
 // Ingest call's reactor server/ingest_stream.h; this class owns the sessions, the database thread
-// and the RPC handlers (queries in queries.cpp, recovery at start in session_recovery.cpp).
+// and the RPC handlers (queries in queries.cpp, a stream's pipeline in session_stream.cpp,
+// recovery, takeover and leases in session_recovery.cpp).
 //
 // - Ingest: one stream = one session. The header is checked (name, intrinsics, parameters; the
 //   database's model settings must stay the same) and the session stored as open; per stream, a
