@@ -136,6 +136,8 @@ int main(int argc, char** argv) {
   // After an accepted registration, the model-to-model numbers: candidates of the incoming
   // segment's kind, and of other kinds (where recall is lost, and how close the wrong ones get).
   std::vector<double> etsdf_same, etsdf_other, overlap_same, overlap_other;
+  // Median chromaticity distance of the registered candidates (matching::compareColours).
+  std::vector<double> colour_same, colour_other;
   double match_ms = 0, ransac_ms = 0, icp_ms = 0;
   // Prefilter recall: stored models holding a segment of the incoming segment's kind, and how
   // many of them the prefilter kept.
@@ -160,9 +162,11 @@ int main(int argc, char** argv) {
     const auto t_gsm = Clock::now();
     const size_t step = std::max<size_t>(1, poses.size() / size_t(per_session));
     for (size_t i = 0; i < poses.size(); i += step) {
-      const Frame f = sim::renderFrame(scene, built, renderer, poses[i], i, false);
-      const auto seg = segmenter.segment(f.depth).value();
-      (void)map.integrate(f.depth, seg.labels, f.T_world_camera).value();
+      const Frame f = sim::renderFrame(scene, built, renderer, poses[i], i, true);
+      // With colour, as a stream brings it (the database's colour check reads it).
+      const ColorImage* colour = f.color ? &*f.color : nullptr;
+      const auto seg = segmenter.segment(f.depth, colour).value();
+      (void)map.integrate(f.depth, seg.labels, f.T_world_camera, colour).value();
       for (auto& s : map.extractIdle()) extracted.insert_or_assign(s.label, std::move(s));
       for (const gsm::Label gone : map.takeWithdrawn()) extracted.erase(gone);  // merged away
       bench::forEachInstancePoint(f, scene.intrinsics, params.tsdf.max_ray_length_m,
@@ -270,6 +274,9 @@ int main(int argc, char** argv) {
           (same ? etsdf_same : etsdf_other).push_back(c.model_verdict.agreement.rmse);
           (same ? overlap_same : overlap_other).push_back(double(c.model_verdict.agreement.overlap));
         }
+        if (c.registration.accepted && c.colour.pairs > 0 && !relevant.empty()) {
+          (same ? colour_same : colour_other).push_back(c.colour.median_distance);
+        }
       }
       if (per_segment) {
         // One line per insert, then its candidates that hold the segment's kind: where each
@@ -285,9 +292,10 @@ int main(int argc, char** argv) {
           // The TSDF numbers exist once registration succeeded (the model check ran).
           const std::string numbers =
               c.registration.accepted
-                  ? absl::StrFormat(" (e_TSDF %.1f mm, o_TSDF %d)",
+                  ? absl::StrFormat(" (e_TSDF %.1f mm, o_TSDF %d, colour %.3f over %d)",
                                     1000 * c.model_verdict.agreement.rmse,
-                                    int64_t(c.model_verdict.agreement.overlap))
+                                    int64_t(c.model_verdict.agreement.overlap),
+                                    c.colour.median_distance, int64_t(c.colour.pairs))
                   : "";
           std::printf("    candidate model %lld: %s%s%s\n", (long long)c.model_id,
                       c.accepted ? "accepted" : c.stage.c_str(),
@@ -388,6 +396,9 @@ int main(int argc, char** argv) {
               quantiles(etsdf_same, 1000.0).c_str(), quantiles(etsdf_other, 1000.0).c_str());
   std::printf("\n  registered, o_TSDF voxels: same kind %s; other kinds %s",
               quantiles(overlap_same, 1.0).c_str(), quantiles(overlap_other, 1.0).c_str());
+  std::printf("\n  registered, median chromaticity distance x1000: same kind %s; "
+              "other kinds %s",
+              quantiles(colour_same, 1000.0).c_str(), quantiles(colour_other, 1000.0).c_str());
   std::printf("\nprefilter recall: %.0f %% of the stored models of the same kind kept as "
               "candidates (%zu of %zu); %zu of %zu inserts kept at least one\n",
               relevant_models ? 100.0 * relevant_kept / relevant_models : 0.0, relevant_kept,

@@ -148,6 +148,8 @@ Status MergingParams::validate() const {
       inRange(tsdf_min_overlap_voxels, 0.0, 1e9, "merging.tsdf_min_overlap_voxels"));
   OBJDB_RETURN_IF_ERROR(
       inRange(completion_margin_voxels, 0, 4, "merging.completion_margin_voxels"));
+  OBJDB_RETURN_IF_ERROR(inRange(colour_max_distance, 0.0, 1.0, "merging.colour_max_distance"));
+  OBJDB_RETURN_IF_ERROR(inRange(colour_min_pairs, 1, 1e9, "merging.colour_min_pairs"));
   return positive(reference_voxel_size_m, "merging.reference_voxel_size_m");
 }
 

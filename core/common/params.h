@@ -208,6 +208,16 @@ struct MergingParams {
   // completion gain +1.3 points (+1.4). At most 4: the region has (2 · margin + 1)³ voxels per
   // surface voxel, and a truncation band of 3 voxels is covered at 3.
   int completion_margin_voxels = 1;
+  // Ours: a registration that the grids accept is still rejected when the two models' colours
+  // disagree where both saw the surface (matching::compareColours): the median chromaticity
+  // distance of at least colour_min_pairs coloured surface-voxel pairs above colour_max_distance.
+  // Shape alone cannot tell a chair's back from a sofa's arm, nor a fire extinguisher from a gas
+  // cylinder. Models without colour (sessions streamed without it, dark surfaces) are judged on
+  // geometry alone. 0 turns the check off. Measured (docs/database.md, "Colour as evidence"):
+  // same-kind candidates on the lounge at most 0.078, wrong SUN3D candidates 0.147-0.485; 30
+  // pairs because a wrong real candidate (a chair onto a sofa's arm) shared only 62.
+  float colour_max_distance = 0.12f;
+  int colour_min_pairs = 30;
   double minOverlapVoxels(double voxel_size_m) const;
   Status validate() const;
 };

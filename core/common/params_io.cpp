@@ -107,6 +107,8 @@ void forEachField(MergingParams& p, Fn&& fn) {
   fn("tsdf_min_overlap_voxels", p.tsdf_min_overlap_voxels);
   fn("reference_voxel_size_m", p.reference_voxel_size_m);
   fn("completion_margin_voxels", p.completion_margin_voxels);
+  fn("colour_max_distance", p.colour_max_distance);
+  fn("colour_min_pairs", p.colour_min_pairs);
 }
 template <typename Fn>
 void forEachField(DatabaseParams& p, Fn&& fn) {

@@ -279,10 +279,21 @@ void ObjectDatabase::verifyRegistered(const model::ObjectModel& incoming,
   result.model_verdict = matching::judge(
       matching::compareGrids(candidate.grid, incoming.grid, T_j_i), params_.merging,
       candidate.grid.voxelSize());
+  result.colour = matching::compareColours(candidate.grid, incoming.grid, T_j_i);
   timings->model_verify_ms += msSince(t);
   if (!result.model_verdict.accepted) {
     result.stage = "model";
     result.reason = result.model_verdict.reason;
+    return;
+  }
+  const MergingParams& merging = params_.merging;
+  if (merging.colour_max_distance > 0.0f &&
+      result.colour.pairs >= size_t(merging.colour_min_pairs) &&
+      result.colour.median_distance > double(merging.colour_max_distance)) {
+    result.stage = "colour";
+    result.reason = absl::StrFormat(
+        "colours disagree: median chromaticity distance %.3f > %.3f over %d surface voxels",
+        result.colour.median_distance, merging.colour_max_distance, result.colour.pairs);
     return;
   }
 
@@ -582,10 +593,11 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
     report.model_id = target.id;
     report.merged = true;
     logger("database")->info(
-        "segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {}; scene "
-        "checks {}, worst e_TSDF {:.4f} m, least o_TSDF {})",
+        "segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {}; colour "
+        "distance {:.3f} over {} voxels; scene checks {}, worst e_TSDF {:.4f} m, least o_TSDF {})",
         session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m, merge.tsdf_overlap,
-        best->scene_checks, best->scene_rmse_max, best->scene_overlap_min);
+        best->colour.median_distance, best->colour.pairs, best->scene_checks,
+        best->scene_rmse_max, best->scene_overlap_min);
     if (kept != nullptr) {
       OBJDB_RETURN_IF_ERROR(absorbCoAccepted(std::move(kept), *best, loaded, live, &report));
     }

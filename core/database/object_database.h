@@ -31,11 +31,13 @@ namespace objdb::database {
 struct CandidateResult {
   int64_t model_id = 0;
   bool accepted = false;
-  std::string stage;   // where it stopped: "registration", "model", "scene", "skipped" (not
+  std::string stage;   // where it stopped: "registration", "model", "colour", "scene", "skipped" (not
                        // evaluated: stop_after_accepted reached), or "" if accepted
   std::string reason;
   matching::Registration registration;
   matching::Verdict model_verdict;
+  // The two models' colours where both saw the surface (after the model check passed).
+  matching::ColourAgreement colour;
   // The registration puts the segment onto a placement of its own session (model::samePlace):
   // one surface under two GSM labels. Merged like any match (the model gains its geometry), it
   // adds an observation but no placement.

@@ -1,5 +1,6 @@
 #include "core/matching/verification.h"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -27,7 +28,56 @@ void forEachObserved(const tsdf::TsdfLayer& layer, Fn&& fn) {
   }
 }
 
+bool coloured(const Rgb8& c) { return int(c.r) + int(c.g) + int(c.b) >= kMinColourSum; }
+
+// The coloured surface voxel of `layer` nearest to p (in its frame), or null.
+const tsdf::TsdfVoxel* colouredSurfaceAt(const tsdf::TsdfLayer& layer, const Eigen::Vector3f& p) {
+  const tsdf::TsdfVoxel* v = layer.voxel(layer.voxelIndexOf(p));
+  if (v == nullptr || !(v->weight > 0.0f) || std::abs(v->distance) > layer.voxelSize()) {
+    return nullptr;
+  }
+  return coloured(v->color) ? v : nullptr;
+}
+
+Rgb8 blendColour(const Rgb8& a, float wa, const Rgb8& b, float wb) {
+  const float total = wa + wb;
+  auto mix = [&](uint8_t x, uint8_t y) {
+    return uint8_t(std::clamp((float(x) * wa + float(y) * wb) / total + 0.5f, 0.0f, 255.0f));
+  };
+  return Rgb8{mix(a.r, b.r), mix(a.g, b.g), mix(a.b, b.b)};
+}
+
 }  // namespace
+
+double chromaticityDistance(const Rgb8& a, const Rgb8& b) {
+  const double sa = double(a.r) + a.g + a.b, sb = double(b.r) + b.g + b.b;
+  if (sa <= 0.0 || sb <= 0.0) return 0.0;
+  return 0.5 * (std::abs(a.r / sa - b.r / sb) + std::abs(a.g / sa - b.g / sb) +
+                std::abs(a.b / sa - b.b / sb));
+}
+
+ColourAgreement compareColours(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLayer& moving,
+                               const Transform& T_fixed_moving) {
+  ColourAgreement agreement;
+  const Eigen::Isometry3f T_moving_fixed = T_fixed_moving.inverse().cast<float>();
+  const float surface = fixed.voxelSize();
+  std::vector<double> distances;
+  forEachObserved(fixed, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel& voxel) {
+    if (std::abs(voxel.distance) > surface || !coloured(voxel.color)) return;
+    const tsdf::TsdfVoxel* other = colouredSurfaceAt(moving, T_moving_fixed * fixed.voxelCenter(v));
+    if (other == nullptr) return;
+    distances.push_back(chromaticityDistance(voxel.color, other->color));
+  });
+  agreement.pairs = distances.size();
+  if (distances.empty()) return agreement;
+  double sum = 0.0;
+  for (double d : distances) sum += d;
+  agreement.mean_distance = sum / double(distances.size());
+  const auto mid = distances.begin() + std::ptrdiff_t(distances.size() / 2);
+  std::nth_element(distances.begin(), mid, distances.end());
+  agreement.median_distance = *mid;
+  return agreement;
+}
 
 GridAgreement compareGrids(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLayer& moving,
                            const Transform& T_fixed_moving) {
@@ -99,6 +149,7 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
   struct Write {
     tsdf::VoxelIndex index;
     float distance, weight;
+    Rgb8 color;
   };
   std::vector<Write> writes;
   for (const tsdf::VoxelIndex& v : candidates) {
@@ -112,7 +163,16 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
     const float wt = t ? t->weight : 0.0f;
     const float dt = t ? t->distance : 0.0f;
     const float w = wt + ws;
-    writes.push_back({v, (wt * dt + ws * ds) / w, std::min(w, max_weight)});
+    // Colour from the nearest source voxel, fused by the same weights where both have one.
+    const Eigen::Vector3f ps = T_source_target * target->voxelCenter(v);
+    const tsdf::TsdfVoxel* sv = source.voxel(source.voxelIndexOf(ps));
+    const bool source_coloured = sv != nullptr && sv->weight > 0.0f && coloured(sv->color);
+    const bool target_coloured = t != nullptr && wt > 0.0f && coloured(t->color);
+    Rgb8 color = t ? t->color : Rgb8{};
+    if (source_coloured) {
+      color = target_coloured ? blendColour(t->color, wt, sv->color, ws) : sv->color;
+    }
+    writes.push_back({v, (wt * dt + ws * ds) / w, std::min(w, max_weight), color});
   }
   if (written_near_surface) {
     *written_near_surface = 0;
@@ -125,6 +185,7 @@ size_t mergeGrids(tsdf::TsdfLayer* target, const tsdf::TsdfLayer& source,
     tsdf::TsdfVoxel* voxel = target->voxel(w.index);
     voxel->distance = w.distance;
     voxel->weight = w.weight;
+    voxel->color = w.color;
   }
   return writes.size();
 }

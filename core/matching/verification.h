@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/common/image.h"
 #include "core/common/params.h"
 #include "core/common/transform.h"
 #include "core/tsdf/tsdf_layer.h"
@@ -26,6 +27,25 @@ struct GridAgreement {
 GridAgreement compareGrids(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLayer& moving,
                            const Transform& T_fixed_moving);
 
+// Colour of the surface where both grids saw it (ours; the paper compares geometry only). Two
+// objects that agree on shape can differ in colour: a chair's back and a sofa's arm, a fire
+// extinguisher and a gas cylinder. Every surface voxel of `fixed` (observed, |d| ≤ one voxel,
+// coloured) is paired with the nearest voxel of `moving` at T_moving_fixed · centre when that one
+// is a coloured surface voxel too. Colour is compared as chromaticity, rgb / (r + g + b), which a
+// change of exposure or of shading leaves alone: the distance of a pair is half the L1 distance
+// of its chromaticities (0 = the same hue and saturation, 1 = disjoint channels). A voxel darker
+// than kMinColourSum (or never coloured: a session without colour leaves 0, 0, 0) has no
+// reliable chromaticity and is not paired.
+struct ColourAgreement {
+  size_t pairs = 0;                // surface voxels both grids coloured
+  double median_distance = 0.0;    // median chromaticity distance over the pairs (0 without)
+  double mean_distance = 0.0;
+};
+inline constexpr int kMinColourSum = 60;  // r + g + b
+double chromaticityDistance(const Rgb8& a, const Rgb8& b);
+ColourAgreement compareColours(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLayer& moving,
+                               const Transform& T_fixed_moving);
+
 struct Verdict {
   bool accepted = false;
   GridAgreement agreement;
@@ -37,7 +57,9 @@ Verdict judge(const GridAgreement& agreement, const MergingParams& params, doubl
 
 // t̂ = target ⊕ source: `source` resampled into target's lattice (T_target_source maps source into
 // target) and fused by weight: d = (w_t d_t + w_s d_s) / (w_t + w_s), w = min(w_t + w_s,
-// max_weight). Voxels only the source observed are added. Grids must share the voxel size.
+// max_weight). Voxels only the source observed are added. Colours are fused by the same weights
+// from the source voxel nearest to each target voxel (a target voxel keeps its own colour where
+// the source has none). Grids must share the voxel size.
 // kFillUnobserved (scene completion) leaves the target's observed voxels as they are. Returns the
 // number of target voxels written; `written_near_surface` gets those within one voxel of the
 // surface (|distance| ≤ voxel size).

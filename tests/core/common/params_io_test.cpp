@@ -65,6 +65,24 @@ TEST(ParamsJson, ANumberBeyondDoubleIsAnErrorNotACrash) {
   EXPECT_THAT(std::string(s.message()), HasSubstr("number overflow"));
 }
 
+TEST(ParamsJson, TheColourCheckIsSetAndCheckedLikeTheOtherThresholds) {
+  Params p;
+  EXPECT_FLOAT_EQ(p.merging.colour_max_distance, 0.12f);
+  EXPECT_EQ(p.merging.colour_min_pairs, 30);
+  ASSERT_TRUE(applyParamsJson(R"({"merging": {"colour_max_distance": 0}})", &p).ok());
+  EXPECT_FLOAT_EQ(p.merging.colour_max_distance, 0.0f);
+  EXPECT_TRUE(p.validate().ok());  // 0 turns it off
+  p.merging.colour_max_distance = 1.5f;  // chromaticity distances lie in [0, 1]
+  Status s = p.validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_THAT(std::string(s.message()), HasSubstr("merging.colour_max_distance"));
+  p.merging.colour_max_distance = 0.12f;
+  p.merging.colour_min_pairs = 0;
+  s = p.validate();
+  ASSERT_FALSE(s.ok());
+  EXPECT_THAT(std::string(s.message()), HasSubstr("merging.colour_min_pairs"));
+}
+
 TEST(ParamsJson, UnknownKeyIsNamed) {
   Params p;
   const Status s = applyParamsJson(R"({"tsdf": {"voxel_size": 0.01}})", &p);

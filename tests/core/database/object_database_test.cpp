@@ -90,6 +90,50 @@ TEST(ObjectDatabase, TwoPartialViewsInTwoSessionsBecomeOneModelWithBothPoses) {
   EXPECT_LE(merges[0].tsdf_rmse_m, 0.02);
 }
 
+// Every observed voxel of the segment's grid in one colour (as a coloured stream fuses it).
+gsm::RawSegment painted(gsm::RawSegment s, Rgb8 colour) {
+  const int vps = s.grid.voxelsPerSide();
+  std::vector<tsdf::BlockIndex> indices;
+  for (const auto& [index, block] : s.grid.blocks()) indices.push_back(index);
+  for (const tsdf::BlockIndex& index : indices) {
+    for (int i = 0; i < vps * vps * vps; ++i) {
+      tsdf::TsdfVoxel* v =
+          s.grid.voxel(index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps)));
+      if (v->weight > 0.0f) v->color = colour;
+    }
+  }
+  return s;
+}
+
+TEST(ObjectDatabase, TheSameShapeInAnotherColourIsNotMerged) {
+  const Rgb8 green{120, 170, 60}, dim_green{60, 85, 30}, brown{110, 85, 60};
+  auto run = [&](Rgb8 tuesday_colour, const Params& p) {
+    Fixture f(p);
+    addScenes(&f.store);
+    EXPECT_TRUE(f.db->insertSegment("monday", painted(segment(7, kMonday, -0.3f, 0.1f), green)).ok());
+    auto r = f.db->insertSegment("tuesday",
+                                 painted(segment(3, kTuesday, -0.1f, 0.3f), tuesday_colour));
+    EXPECT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->candidates, 1u);
+    return *r;
+  };
+  // The same colour under less light: merged, the colours agreeing.
+  const InsertReport same = run(dim_green, params());
+  ASSERT_TRUE(same.merged) << same.results[0].stage << ": " << same.results[0].reason;
+  EXPECT_GT(same.results[0].colour.pairs, 100u);
+  EXPECT_LT(same.results[0].colour.median_distance, 0.01);
+  // Brown: the shapes agree, the colours do not.
+  const InsertReport other = run(brown, params());
+  EXPECT_FALSE(other.merged);
+  EXPECT_EQ(other.results[0].stage, "colour");
+  EXPECT_THAT(other.results[0].reason, HasSubstr("colours disagree"));
+  EXPECT_TRUE(other.results[0].model_verdict.accepted);  // the grids alone would merge
+  // With the check off, geometry decides alone.
+  Params off = params();
+  off.merging.colour_max_distance = 0.0f;
+  EXPECT_TRUE(run(brown, off).merged);
+}
+
 TEST(ObjectDatabase, AChairAndAFireExtinguisherAreNeverMerged) {
   Fixture f;
   const World c{chair(), pose(0, 0, 0.2)};

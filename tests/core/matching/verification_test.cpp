@@ -72,6 +72,77 @@ TEST(CompareGrids, AnUpsideDownSurfaceFailsWhereTheSurfacesCoincide) {
   EXPECT_THAT(verdict.reason, HasSubstr("e_TSDF"));
 }
 
+// Paints every observed voxel of the layer with one colour, or with `below` under height z0.
+void paint(tsdf::TsdfLayer* layer, Rgb8 colour, Rgb8 below = {}, float z0 = -1e9f) {
+  const int vps = layer->voxelsPerSide();
+  std::vector<tsdf::BlockIndex> indices;
+  for (const auto& [index, block] : layer->blocks()) indices.push_back(index);
+  for (const tsdf::BlockIndex& index : indices) {
+    for (int i = 0; i < vps * vps * vps; ++i) {
+      const tsdf::VoxelIndex v =
+          index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps));
+      tsdf::TsdfVoxel* voxel = layer->voxel(v);
+      if (voxel->weight > 0.0f) voxel->color = layer->voxelCenter(v).z() < z0 ? below : colour;
+    }
+  }
+}
+
+TEST(Chromaticity, IgnoresBrightnessAndSeparatesHues) {
+  // The same hue under half the light: 0.
+  EXPECT_NEAR(chromaticityDistance({200, 100, 50}, {100, 50, 25}), 0.0, 1e-9);
+  // Pure red against pure green: disjoint channels, 1.
+  EXPECT_NEAR(chromaticityDistance({255, 0, 0}, {0, 255, 0}), 1.0, 1e-9);
+  // A lounge round chair (200, 70, 45) against its square table (170, 140, 100).
+  EXPECT_GT(chromaticityDistance({200, 70, 45}, {170, 140, 100}), 0.2);
+  // Grey against white: the same chromaticity.
+  EXPECT_NEAR(chromaticityDistance({90, 90, 90}, {250, 250, 250}), 0.0, 1e-9);
+}
+
+TEST(CompareColours, SameColoursAgreeOtherColoursDisagreeAndDarkOrUncolouredVoxelsDoNotPair) {
+  auto a = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  auto b = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  // Never coloured (a session streamed without colour): nothing to compare.
+  EXPECT_EQ(compareColours(a.layer, b.layer, Transform::Identity()).pairs, 0u);
+
+  const Rgb8 green{120, 170, 60}, brown{110, 85, 60};
+  paint(&a.layer, green);
+  paint(&b.layer, Rgb8{60, 85, 30});  // the same green in half the light
+  const ColourAgreement same = compareColours(a.layer, b.layer, Transform::Identity());
+  EXPECT_GT(same.pairs, 1000u);
+  EXPECT_LT(same.median_distance, 0.01);
+  // Only surface voxels pair: fewer than the band's observed voxels.
+  EXPECT_LT(same.pairs, a.layer.numObservedVoxels() / 2);
+
+  paint(&b.layer, brown);
+  const ColourAgreement other = compareColours(a.layer, b.layer, Transform::Identity());
+  EXPECT_EQ(other.pairs, same.pairs);
+  EXPECT_NEAR(other.median_distance, chromaticityDistance(green, brown), 1e-6);
+
+  // 60 % of b's surface green (z ≥ −3 cm on a 15 cm sphere), the rest brown: the median
+  // follows the larger part, the mean does not.
+  paint(&b.layer, green, brown, -0.03f);
+  const ColourAgreement mostly = compareColours(a.layer, b.layer, Transform::Identity());
+  EXPECT_LT(mostly.median_distance, 0.01);
+  EXPECT_GT(mostly.mean_distance, 0.01);
+
+  // Too dark to have a hue: not paired.
+  paint(&b.layer, Rgb8{10, 20, 5});
+  EXPECT_EQ(compareColours(a.layer, b.layer, Transform::Identity()).pairs, 0u);
+}
+
+TEST(CompareColours, LooksUpTheMovingGridThroughTheTransform) {
+  // The moving sphere is red on top (z > 0 in its frame) and blue below. Turned upside down
+  // onto a fixed sphere that is red on top, the colours disagree; the right way up they agree.
+  auto fixed = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  auto moving = sdfGrid(sphereSdf({0, 0, 0}, 0.15f), kLo, kHi, kVoxel, 3 * kVoxel);
+  const Rgb8 red{200, 30, 30}, blue{30, 30, 200};
+  paint(&fixed.layer, red, blue, 0.0f);
+  paint(&moving.layer, red, blue, 0.0f);
+  EXPECT_LT(compareColours(fixed.layer, moving.layer, Transform::Identity()).median_distance, 0.01);
+  const Transform flip(Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitX()));
+  EXPECT_GT(compareColours(fixed.layer, moving.layer, flip).median_distance, 0.5);
+}
+
 TEST(Judge, AppliesBothThresholdsWithTheOverlapScaledToTheVoxelSize) {
   MergingParams params;  // e* = 2 cm, o* = 10^4 voxels at 1 cm
   GridAgreement g;
@@ -118,6 +189,28 @@ TEST(MergeGrids, WeightedAverageWhereBothAndSourceValuesWhereOnlyItObserved) {
   tsdf::TsdfLayer capped = linearField(0.0f, 2.0f, -0.1f, 0.1f);
   mergeGrids(&capped, source, Transform::Identity(), 2.5f);
   EXPECT_FLOAT_EQ(capped.voxel(both)->weight, 2.5f);
+}
+
+TEST(MergeGrids, CarriesColoursFusedByTheSameWeights) {
+  tsdf::TsdfLayer target = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  tsdf::TsdfLayer source = linearField(0.01f, 1.0f, -0.1f, 0.3f);
+  paint(&target, Rgb8{240, 60, 30});
+  paint(&source, Rgb8{30, 60, 240});
+  mergeGrids(&target, source, Transform::Identity(), 100.0f);
+  // Where both observed: (2 · target + 1 · source) / 3.
+  const tsdf::TsdfVoxel* both = target.voxel(target.voxelIndexOf(Eigen::Vector3f(0, 0, 0.013f)));
+  ASSERT_NE(both, nullptr);
+  EXPECT_EQ(both->color, (Rgb8{170, 60, 100}));
+  // Where only the source observed: its colour.
+  const tsdf::TsdfVoxel* only = target.voxel(target.voxelIndexOf(Eigen::Vector3f(0.2f, 0, 0.013f)));
+  ASSERT_NE(only, nullptr);
+  EXPECT_EQ(only->color, (Rgb8{30, 60, 240}));
+  // A source without colour leaves the target's as it was.
+  tsdf::TsdfLayer plain = linearField(0.0f, 2.0f, -0.1f, 0.1f);
+  paint(&plain, Rgb8{240, 60, 30});
+  mergeGrids(&plain, linearField(0.01f, 1.0f, -0.1f, 0.3f), Transform::Identity(), 100.0f);
+  EXPECT_EQ(plain.voxel(plain.voxelIndexOf(Eigen::Vector3f(0, 0, 0.013f)))->color,
+            (Rgb8{240, 60, 30}));
 }
 
 TEST(MergeGrids, FillUnobservedLeavesObservedVoxelsAlone) {
