@@ -156,6 +156,7 @@ int main(int argc, char** argv) {
     auto segmenter =
         segmentation::DepthSegmenter::create(params.segmentation, scene.intrinsics).value();
     gsm::Gsm map = gsm::Gsm::create(params.tsdf, params.gsm, scene.intrinsics).value();
+    map.setNoiseModel(params.model);
     std::map<uint64_t, std::map<int, int>> truth;  // voxel → instance id → points
     std::map<gsm::Label, gsm::RawSegment> extracted;  // latest extraction per label
     last_session.clear();

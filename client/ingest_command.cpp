@@ -115,6 +115,7 @@ int runIngestCommand(int argc, char** argv) {
     if (!segmenter.ok()) return cli::reportError(kCommand, segmenter.status());
     auto map = gsm::Gsm::create(params.tsdf, params.gsm, ds.intrinsics(), int(threads));
     if (!map.ok()) return cli::reportError(kCommand, map.status());
+    map->setNoiseModel(params.model);
     storage::SessionInfo info;
     info.name = name;
     info.intrinsics_json = storage::intrinsicsJson(ds.intrinsics());

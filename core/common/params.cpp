@@ -95,11 +95,14 @@ Status ModelParams::validate() const {
   return inRange(cloud_spacing_m, 0.0005, 1.0, "model.cloud_spacing_m");
 }
 
-float ModelParams::planeDistance(float depth_m) const {
-  if (!(std::isfinite(depth_m) && depth_m > 0.0f)) return plane_distance_m;
+float ModelParams::depthNoise(float depth_m) const {
+  if (!(std::isfinite(depth_m) && depth_m > 0.0f)) return 0.0f;
   const float dz = depth_m - noise_z0_m;
-  const float sigma = noise_sigma0_m + noise_sigma2_m * dz * dz;
-  return std::max(plane_distance_m, plane_noise_sigmas * sigma);
+  return noise_sigma0_m + noise_sigma2_m * dz * dz;
+}
+
+float ModelParams::planeDistance(float depth_m) const {
+  return std::max(plane_distance_m, plane_noise_sigmas * depthNoise(depth_m));
 }
 
 Status KeypointParams::validate() const {
@@ -150,6 +153,7 @@ Status MergingParams::validate() const {
       inRange(completion_margin_voxels, 0, 4, "merging.completion_margin_voxels"));
   OBJDB_RETURN_IF_ERROR(inRange(colour_max_distance, 0.0, 1.0, "merging.colour_max_distance"));
   OBJDB_RETURN_IF_ERROR(inRange(colour_min_pairs, 1, 1e9, "merging.colour_min_pairs"));
+  OBJDB_RETURN_IF_ERROR(inRange(noise_sigmas, 0.0, 10.0, "merging.noise_sigmas"));
   return positive(reference_voxel_size_m, "merging.reference_voxel_size_m");
 }
 

@@ -109,6 +109,7 @@ void forEachField(MergingParams& p, Fn&& fn) {
   fn("completion_margin_voxels", p.completion_margin_voxels);
   fn("colour_max_distance", p.colour_max_distance);
   fn("colour_min_pairs", p.colour_min_pairs);
+  fn("noise_sigmas", p.noise_sigmas);
 }
 template <typename Fn>
 void forEachField(DatabaseParams& p, Fn&& fn) {

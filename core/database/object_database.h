@@ -38,6 +38,9 @@ struct CandidateResult {
   matching::Verdict model_verdict;
   // The two models' colours where both saw the surface (after the model check passed).
   matching::ColourAgreement colour;
+  // Accepted beyond the paper's e*_ICP or e*_TSDF, within the depth noise, with colour confirming
+  // (MergingParams::noise_sigmas).
+  bool loosened = false;
   // The registration puts the segment onto a placement of its own session (model::samePlace):
   // one surface under two GSM labels. Merged like any match (the model gains its geometry), it
   // adds an observation but no placement.
@@ -149,12 +152,24 @@ class ObjectDatabase {
   // The smaller span of `incoming`'s best plane grown through `session`'s scene (live first).
   StatusOr<float> growInScene(const std::string& session, const model::ObjectModel& incoming,
                               const LiveScenes& live);
+  // e*_ICP and e*_TSDF for a segment seen from depth_m in a session whose depth noise measured
+  // `noise_scale` times the model's σ (gsm::RawSegment; MergingParams::noise_sigmas). Either 0:
+  // the paper's thresholds.
+  struct Thresholds {
+    double icp_m = 0.0, tsdf_m = 0.0;
+    float depth_m = 0.0f, noise_scale = 0.0f;  // what they were loosened for (reasons, logs)
+  };
+  Thresholds thresholdsFor(float depth_m, float noise_scale) const;
+  // `thresholds`: the incoming segment's (the paper's for a join of stored models).
   CandidateResult evaluate(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
-                           const LiveScenes& live, InsertTimings* timings);
+                           const Thresholds& thresholds, const LiveScenes& live,
+                           InsertTimings* timings);
   // The checks after registration (out->registration accepted): model to model on the grids,
-  // then the merged grid at every pose of both against its scene. Fills the rest of `out`.
+  // the colours, then the merged grid at every pose of both against its scene. Fills the rest
+  // of `out`.
   void verifyRegistered(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
-                        const LiveScenes& live, InsertTimings* timings, CandidateResult* out);
+                        const Thresholds& thresholds, const LiveScenes& live,
+                        InsertTimings* timings, CandidateResult* out);
   // DatabaseParams::merge_co_accepted, after the segment merged into `merged` (best): the other
   // accepted candidates (`loaded` in report->results' order) verified onto it and merged in.
   Status absorbCoAccepted(std::shared_ptr<const model::ObjectModel> merged,

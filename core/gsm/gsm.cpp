@@ -203,8 +203,13 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
     return std::chrono::duration<double, std::milli>(b - a).count();
   };
   const auto t_start = Clock::now();
+  // The frame against the map before it is fused (the residuals count once it fused).
+  SurfaceNoise frame_noise(surface_noise_.model());
+  frame_noise.sample(layer_, depth, T_world_camera, intrinsics_,
+                     tsdf_params_.truncationDistance());
   // Geometry first: it validates the frame and pose and changes nothing when they are bad.
   OBJDB_ASSIGN_OR_RETURN(result.tsdf, integrator_.integrate(depth, T_world_camera, &layer_, color));
+  surface_noise_.add(frame_noise);
   const auto t_integrated = Clock::now();
   result.timings.integration_ms = ms(t_start, t_integrated);
 
@@ -542,6 +547,7 @@ std::vector<RawSegment> Gsm::extractIdleLabels(bool flush) {
     segments.push_back(extractRawSegment(layer_, label, std::move(voxels), margin,
                                          info.last_update_frame, frame_));
     segments.back().observation_depth_m = depth;
+    segments.back().noise_scale = surface_noise_.scale();
     segments.back().parts = {label};
   }
   return segments;
@@ -609,6 +615,7 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
                                        : parts.front();
                           }));
     segments.back().observation_depth_m = depth;
+    segments.back().noise_scale = surface_noise_.scale();
     segments.back().parts = parts;
   }
   return segments;

@@ -21,6 +21,7 @@
 #include "core/common/params.h"
 #include "core/gsm/label_voxel.h"
 #include "core/gsm/objects.h"
+#include "core/gsm/surface_noise.h"
 #include "core/segmentation/depth_segmenter.h"
 #include "core/tsdf/tsdf_integrator.h"
 
@@ -46,6 +47,9 @@ struct RawSegment {
   // The part (GSM label, one of `parts`) of each of label_voxels, aligned with it; empty when not
   // recorded (a segment stored before parts had geometry).
   std::vector<Label> voxel_parts;
+  // The session's measured depth-noise scale when the segment was extracted (SurfaceNoise::scale;
+  // 0: unknown, e.g. too few frames yet or a segment of a saved map).
+  float noise_scale = 0.0f;
 };
 
 // Milliseconds spent per step of Gsm::integrate.
@@ -137,6 +141,10 @@ class Gsm {
   size_t numLabels() const { return info_.size(); }
   const absl::flat_hash_map<Label, LabelInfo>& labels() const { return info_; }
   size_t labelBytes() const;
+  // The session's depth noise as measured against the map so far (surface_noise.h), and the
+  // σ(z) model it is measured against (ModelParams' noise fields; their defaults until set).
+  const SurfaceNoise& surfaceNoise() const { return surface_noise_; }
+  void setNoiseModel(const ModelParams& model) { surface_noise_ = SurfaceNoise(model); }
 
  private:
   Gsm(const TsdfParams& tsdf_params, const GsmParams& gsm_params, tsdf::TsdfIntegrator integrator,
@@ -178,6 +186,7 @@ class Gsm {
   Label next_label_ = 1;
   int64_t frame_ = 0;
   std::vector<Eigen::Vector3f> camera_positions_;  // world, one per integrated frame
+  SurfaceNoise surface_noise_;
   std::unique_ptr<FrameScratch> scratch_;
 };
 

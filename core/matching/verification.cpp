@@ -47,6 +47,13 @@ Rgb8 blendColour(const Rgb8& a, float wa, const Rgb8& b, float wb) {
   return Rgb8{mix(a.r, b.r), mix(a.g, b.g), mix(a.b, b.b)};
 }
 
+// The middle value (upper median); reorders *values, which must not be empty.
+double median(std::vector<double>* values) {
+  const auto mid = values->begin() + std::ptrdiff_t(values->size() / 2);
+  std::nth_element(values->begin(), mid, values->end());
+  return *mid;
+}
+
 }  // namespace
 
 double chromaticityDistance(const Rgb8& a, const Rgb8& b) {
@@ -61,21 +68,27 @@ ColourAgreement compareColours(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLay
   ColourAgreement agreement;
   const Eigen::Isometry3f T_moving_fixed = T_fixed_moving.inverse().cast<float>();
   const float surface = fixed.voxelSize();
-  std::vector<double> distances;
+  const Rgb8 grey{1, 1, 1};
+  std::vector<double> distances, chromatic;
   forEachObserved(fixed, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel& voxel) {
     if (std::abs(voxel.distance) > surface || !coloured(voxel.color)) return;
     const tsdf::TsdfVoxel* other = colouredSurfaceAt(moving, T_moving_fixed * fixed.voxelCenter(v));
     if (other == nullptr) return;
-    distances.push_back(chromaticityDistance(voxel.color, other->color));
+    const double d = chromaticityDistance(voxel.color, other->color);
+    distances.push_back(d);
+    if (chromaticityDistance(voxel.color, grey) >= kMinSaturation &&
+        chromaticityDistance(other->color, grey) >= kMinSaturation) {
+      chromatic.push_back(d);
+    }
   });
   agreement.pairs = distances.size();
+  agreement.chromatic_pairs = chromatic.size();
   if (distances.empty()) return agreement;
   double sum = 0.0;
   for (double d : distances) sum += d;
   agreement.mean_distance = sum / double(distances.size());
-  const auto mid = distances.begin() + std::ptrdiff_t(distances.size() / 2);
-  std::nth_element(distances.begin(), mid, distances.end());
-  agreement.median_distance = *mid;
+  agreement.median_distance = median(&distances);
+  agreement.chromatic_median_distance = chromatic.empty() ? 0.0 : median(&chromatic);
   return agreement;
 }
 

@@ -85,6 +85,7 @@ Status startPipeline(LiveSession& session, int integration_threads) {
   session.segmenter.emplace(std::move(segmenter));
   OBJDB_ASSIGN_OR_RETURN(gsm::Gsm map, gsm::Gsm::create(session.params.tsdf, session.params.gsm,
                                                         session.intrinsics, integration_threads));
+  map.setNoiseModel(session.params.model);
   session.map.emplace(std::move(map));
   return absl::OkStatus();
 }

@@ -134,6 +134,49 @@ TEST(ObjectDatabase, TheSameShapeInAnotherColourIsNotMerged) {
   EXPECT_TRUE(run(brown, off).merged);
 }
 
+TEST(ObjectDatabase, NoisyDepthLoosensTheThresholdsOnlyWhereColourConfirms) {
+  // An e*_ICP below what these two views reach (2.3 mm; a stand-in for real depth at a
+  // distance), so that only the loosening can merge them: seen from 3 m (σ 1.4 cm) in a session
+  // measured twice as noisy as the model, e*_ICP and e*_TSDF each gain (2 − 1) · σ(3 m).
+  Params p = params();
+  p.matching.icp_max_rmse_m = 0.0015f;
+  const Rgb8 green{120, 170, 60}, grey{150, 150, 150};
+  auto run = [&](Rgb8 colour, float noise_scale, const Params& with) {
+    Fixture f(with);
+    addScenes(&f.store);
+    gsm::RawSegment monday = painted(segment(7, kMonday, -0.3f, 0.1f), colour);
+    gsm::RawSegment tuesday = painted(segment(3, kTuesday, -0.1f, 0.3f), colour);
+    for (gsm::RawSegment* s : {&monday, &tuesday}) {
+      s->observation_depth_m = 3.0f;
+      s->noise_scale = noise_scale;
+    }
+    EXPECT_TRUE(f.db->insertSegment("monday", monday).ok());
+    auto r = f.db->insertSegment("tuesday", tuesday);
+    EXPECT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->candidates, 1u);
+    return *r;
+  };
+  // Chromatic and agreeing: merged beyond the paper's thresholds, and said so.
+  const InsertReport confirmed = run(green, 2.0f, p);
+  const CandidateResult& c = confirmed.results[0];
+  ASSERT_TRUE(confirmed.merged) << c.stage << ": " << c.reason;
+  EXPECT_TRUE(c.loosened);
+  EXPECT_GT(c.registration.icp_rmse, 0.0015);
+  EXPECT_GT(c.colour.chromatic_pairs, 100u);
+  // Grey: the colours agree but confirm nothing.
+  const InsertReport grey_report = run(grey, 2.0f, p);
+  EXPECT_FALSE(grey_report.merged);
+  EXPECT_EQ(grey_report.results[0].stage, "colour");
+  EXPECT_THAT(grey_report.results[0].reason, HasSubstr("no colour confirms it"));
+  // Depth as noisy as the model says (no excess), or the loosening off: the paper's thresholds.
+  const InsertReport model_noise = run(green, 1.0f, p);
+  EXPECT_FALSE(model_noise.merged);
+  EXPECT_NE(model_noise.results[0].stage, "colour");
+  Params off = p;
+  off.merging.noise_sigmas = 0.0f;
+  EXPECT_FALSE(run(green, 2.0f, off).merged);
+}
+
 TEST(ObjectDatabase, AChairAndAFireExtinguisherAreNeverMerged) {
   Fixture f;
   const World c{chair(), pose(0, 0, 0.2)};

@@ -110,6 +110,9 @@ TEST(CompareColours, SameColoursAgreeOtherColoursDisagreeAndDarkOrUncolouredVoxe
   const ColourAgreement same = compareColours(a.layer, b.layer, Transform::Identity());
   EXPECT_GT(same.pairs, 1000u);
   EXPECT_LT(same.median_distance, 0.01);
+  // Green has a hue on both sides: every pair can confirm the match.
+  EXPECT_EQ(same.chromatic_pairs, same.pairs);
+  EXPECT_LT(same.chromatic_median_distance, 0.01);
   // Only surface voxels pair: fewer than the band's observed voxels.
   EXPECT_LT(same.pairs, a.layer.numObservedVoxels() / 2);
 
@@ -124,6 +127,15 @@ TEST(CompareColours, SameColoursAgreeOtherColoursDisagreeAndDarkOrUncolouredVoxe
   const ColourAgreement mostly = compareColours(a.layer, b.layer, Transform::Identity());
   EXPECT_LT(mostly.median_distance, 0.01);
   EXPECT_GT(mostly.mean_distance, 0.01);
+
+  // Grey against white: they agree, but neither has a hue to confirm anything with.
+  paint(&a.layer, Rgb8{90, 90, 95});
+  paint(&b.layer, Rgb8{240, 240, 235});
+  const ColourAgreement grey = compareColours(a.layer, b.layer, Transform::Identity());
+  EXPECT_EQ(grey.pairs, same.pairs);
+  EXPECT_LT(grey.median_distance, 0.02);
+  EXPECT_EQ(grey.chromatic_pairs, 0u);
+  paint(&a.layer, green);
 
   // Too dark to have a hue: not paired.
   paint(&b.layer, Rgb8{10, 20, 5});
