@@ -61,10 +61,13 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
           } else if (response.object().kind() == v1::ObjectEvent::MERGED) {
             ++merged;
             if (options.verbose) {
-              std::printf(" merged into object %llu (e_TSDF %.4f m, o_TSDF %llu)\n",
-                          (unsigned long long)response.object().into_object_id(),
-                          response.object().evidence().tsdf_rmse_m(),
-                          (unsigned long long)response.object().evidence().overlap_voxels());
+              const v1::MergeEvidence& e = response.object().evidence();
+              std::printf(" merged into object %llu (e_TSDF %.4f m, o_TSDF %llu, colour %.3f over "
+                          "%llu voxels%s)\n",
+                          (unsigned long long)response.object().into_object_id(), e.tsdf_rmse_m(),
+                          (unsigned long long)e.overlap_voxels(), e.colour_distance(),
+                          (unsigned long long)e.colour_pairs(),
+                          e.loosened() ? "; beyond 2 cm, within the measured depth noise" : "");
             }
           } else {
             ++created;

@@ -409,6 +409,10 @@ void toProto(const database::CandidateResult& r, v1::MergeEvidence* ev) {
   ev->set_scene_rmse_max_m(r.scene_rmse_max);
   ev->set_scene_overlap_min_voxels(r.scene_overlap_min);
   ev->set_same_place(r.same_place);
+  ev->set_colour_distance(r.colour.median_distance);
+  ev->set_colour_pairs(r.colour.pairs);
+  ev->set_colour_chromatic_pairs(r.colour.chromatic_pairs);
+  ev->set_loosened(r.loosened);
 }
 
 std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,

@@ -16,6 +16,9 @@ database::CandidateResult accepted(int64_t id, double rmse, size_t overlap) {
   r.model_verdict.agreement.overlap = overlap;
   r.model_verdict.agreement.compared = overlap + 100;
   r.scene_checks = 3;
+  r.colour.pairs = overlap / 3;
+  r.colour.chromatic_pairs = overlap / 4;
+  r.colour.median_distance = rmse;
   return r;
 }
 
@@ -49,12 +52,28 @@ TEST(ObjectEvents, ObjectsThatJoinTheSurvivorEachGetAMergedEventAfterTheSegments
   EXPECT_DOUBLE_EQ(events[0].evidence().tsdf_rmse_m(), 0.0044);
   EXPECT_EQ(events[0].evidence().overlap_voxels(), 6550u);
   EXPECT_EQ(events[0].evidence().non_overlap_voxels(), 100u);
+  EXPECT_DOUBLE_EQ(events[0].evidence().colour_distance(), 0.0044);
+  EXPECT_EQ(events[0].evidence().colour_pairs(), 6550u / 3);
+  EXPECT_EQ(events[0].evidence().colour_chromatic_pairs(), 6550u / 4);
+  EXPECT_FALSE(events[0].evidence().loosened());
   EXPECT_EQ(events[1].kind(), v1::ObjectEvent::MERGED);
   EXPECT_EQ(events[1].object_id(), 26u);
   EXPECT_EQ(events[1].into_object_id(), 9u);
   EXPECT_EQ(events[1].segment_id(), 77u);
   EXPECT_DOUBLE_EQ(events[1].evidence().tsdf_rmse_m(), 0.0037);
   EXPECT_EQ(events[1].evidence().scene_checks(), 3u);
+}
+
+TEST(ObjectEvents, AMergeBeyondThePapersThresholdsSaysSo) {
+  database::InsertReport report;
+  report.model_id = 4;
+  report.merged = true;
+  report.results = {accepted(4, 0.0285, 9461)};
+  report.results[0].loosened = true;
+  const auto events = objectEvents(report, 8);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_TRUE(events[0].evidence().loosened());
+  EXPECT_DOUBLE_EQ(events[0].evidence().tsdf_rmse_m(), 0.0285);
 }
 
 }  // namespace
