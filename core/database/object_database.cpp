@@ -242,7 +242,8 @@ StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::Object
 ObjectDatabase::Thresholds ObjectDatabase::thresholdsFor(float depth_m, float noise_scale) const {
   // Only the noise beyond the model's σ(z) loosens: the paper's thresholds hold for a sensor as
   // noisy as the model says (the lounge measures 0.96-1.05; SUN3D's real sweeps 1.9-2.0).
-  const double excess = std::isfinite(noise_scale) ? std::max(0.0, double(noise_scale) - 1.0) : 0.0;
+  const double excess =
+      std::isfinite(noise_scale) ? std::max(0.0, double(noise_scale) - 1.0) : 0.0;
   const double extra =
       double(params_.merging.noise_sigmas) * excess * params_.model.depthNoise(depth_m);
   return {double(params_.matching.icp_max_rmse_m) + extra,
@@ -258,7 +259,8 @@ CandidateResult ObjectDatabase::evaluate(const model::ObjectModel& incoming,
   auto t = Clock::now();
   MatchingParams matching = params_.matching;
   matching.icp_max_rmse_m = float(thresholds.icp_m);
-  result.registration = matching::registerModels(incoming, candidate, *indexOf(candidate), matching);
+  result.registration =
+      matching::registerModels(incoming, candidate, *indexOf(candidate), matching);
   timings->match_register_ms += msSince(t);
   if (!result.registration.accepted) {
     result.stage = "registration";
@@ -631,7 +633,8 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
     report.merged = true;
     logger("database")->info(
         "segment {}/{} merged into object {} (e_ICP {:.4f} m, e_TSDF {:.4f} m, o_TSDF {}; colour "
-        "distance {:.3f} over {} voxels{}; scene checks {}, worst e_TSDF {:.4f} m, least o_TSDF {})",
+        "distance {:.3f} over {} voxels{}; scene checks {}, worst e_TSDF {:.4f} m, least o_TSDF "
+        "{})",
         session, segment.label, target.id, merge.icp_rmse_m, merge.tsdf_rmse_m, merge.tsdf_overlap,
         best->colour.median_distance, best->colour.pairs,
         best->loosened ? ", thresholds loosened with the depth noise" : "", best->scene_checks,

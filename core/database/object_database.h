@@ -31,8 +31,9 @@ namespace objdb::database {
 struct CandidateResult {
   int64_t model_id = 0;
   bool accepted = false;
-  std::string stage;   // where it stopped: "registration", "model", "colour", "scene", "skipped" (not
-                       // evaluated: stop_after_accepted reached), or "" if accepted
+  std::string stage;   // where it stopped: "registration", "model", "colour", "scene",
+                       // "skipped" (not evaluated: stop_after_accepted reached), or "" if
+                       // accepted
   std::string reason;
   matching::Registration registration;
   matching::Verdict model_verdict;

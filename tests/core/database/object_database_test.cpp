@@ -110,7 +110,8 @@ TEST(ObjectDatabase, TheSameShapeInAnotherColourIsNotMerged) {
   auto run = [&](Rgb8 tuesday_colour, const Params& p) {
     Fixture f(p);
     addScenes(&f.store);
-    EXPECT_TRUE(f.db->insertSegment("monday", painted(segment(7, kMonday, -0.3f, 0.1f), green)).ok());
+    const gsm::RawSegment monday = painted(segment(7, kMonday, -0.3f, 0.1f), green);
+    EXPECT_TRUE(f.db->insertSegment("monday", monday).ok());
     auto r = f.db->insertSegment("tuesday",
                                  painted(segment(3, kTuesday, -0.1f, 0.3f), tuesday_colour));
     EXPECT_TRUE(r.ok()) << r.status();
