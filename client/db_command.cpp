@@ -207,8 +207,9 @@ int complete(const storage::Store& store, const std::string& session, const std:
   for (const auto& p : report.placements) {
     verified += p.verified ? 1 : 0;
     const std::string verdict =
-        p.verified ? absl::StrFormat("verified (e_TSDF %.4f m, o_TSDF %d)",
-                                     p.verdict.agreement.rmse, p.verdict.agreement.overlap)
+        p.verified ? absl::StrFormat("verified (e_TSDF %.4f m, o_TSDF %d)%s",
+                                     p.verdict.agreement.rmse, p.verdict.agreement.overlap,
+                                     p.blurred ? ", blurred: fills nothing" : "")
                    : "rejected: " + p.verdict.reason;
     std::printf("%8lld %8u %9zu  %-50s %8zu %14zu\n", (long long)p.model_id, p.label,
                 p.model_segments, verdict.c_str(), p.filled_voxels, p.filled_surface_voxels);

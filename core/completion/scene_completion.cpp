@@ -50,6 +50,14 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
   OBJDB_ASSIGN_OR_RETURN(const database::MatchEntries entries, store.matchEntries());
   // A model that cannot be read might be one of this session's: say so rather than leave it out.
   if (!entries.skipped.empty()) return entries.skipped.front();
+  // A model with a merge beyond the paper's e*_TSDF (loosened with a session's measured depth
+  // noise, MergingParams::noise_sigmas) is one object for the database, but its grid is as
+  // blurred as that session's poses: it is placed and checked, and fills nothing.
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<database::MergeRecord> merges, store.mergeRecords());
+  absl::flat_hash_set<int64_t> blurred;
+  for (const database::MergeRecord& m : merges) {
+    if (m.tsdf_rmse_m > double(merging.tsdf_max_rmse_m)) blurred.insert(m.target);
+  }
   std::vector<int64_t> ids;
   for (const auto& e : entries.entries) {
     const bool here = std::any_of(e.segments.begin(), e.segments.end(),
@@ -76,7 +84,8 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
           matching::compareGrids(model->grid, *scene, o.T_world_object.inverse()), merging,
           model->grid.voxelSize());
       p.verified = p.verdict.accepted;
-      if (p.verified) {
+      p.blurred = blurred.contains(id);
+      if (p.verified && !p.blurred) {
         if (region.empty()) region = objectRegion(*model, merging.completion_margin_voxels);
         matching::MergeOptions fill;
         fill.mode = matching::MergeMode::kFillUnobserved;

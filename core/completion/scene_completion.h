@@ -4,7 +4,8 @@
 // surface voxels (MergingParams::completion_margin_voxels) fill what the scene did not observe:
 // voxels it never saw, and voxels seen too little to be meshed (weight below the scene's
 // TsdfParams::mesh_min_weight), which are fused with the model by weight. What the scene measured
-// is kept: completion adds, it does not overwrite.
+// is kept: completion adds, it does not overwrite. A model that holds a merge beyond the paper's
+// e*_TSDF (accepted within a session's measured depth noise) fills nothing.
 #pragma once
 
 #include <functional>
@@ -29,6 +30,9 @@ struct Placement {
   Transform T_world_object = Transform::Identity();
   size_t model_segments = 0;  // how many raw segments built the model
   bool verified = false;
+  // The model holds a merge beyond the paper's e*_TSDF (MergingParams::noise_sigmas): it fills
+  // nothing, verified or not.
+  bool blurred = false;
   matching::Verdict verdict;  // the placed model against the scene
   size_t filled_voxels = 0;   // scene voxels it filled
   size_t filled_surface_voxels = 0;  // of those, within one voxel of its surface

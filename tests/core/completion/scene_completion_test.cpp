@@ -144,6 +144,31 @@ TEST(CompleteScene, FillsTheObjectButNotWhatStoodNearItInAnotherSession) {
   EXPECT_TRUE(whole.interpolateDistance(plate_world, &d));
 }
 
+TEST(CompleteScene, AModelMergedBeyondThePapersETsdfFillsNothing) {
+  Fixture f;
+  ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
+  auto merged = f.db->insertSegment("tuesday", rawSegment(1, kTuesday, kBack));
+  ASSERT_TRUE(merged.ok() && merged->merged);
+  const auto records = f.store.mergeRecords().value();
+  ASSERT_EQ(records.size(), 1u);
+  ASSERT_GT(records[0].tsdf_rmse_m, 0.0);
+  // As if that merge had needed a session's depth noise: e*_TSDF below its e_TSDF.
+  Params p = params();
+  p.merging.tsdf_max_rmse_m = float(records[0].tsdf_rmse_m * 0.99);
+  CompletionReport report;
+  auto completed = completeScene(f.store, "monday", p.merging, p.tsdf, &report);
+  ASSERT_TRUE(completed.ok()) << completed.status();
+  ASSERT_EQ(report.placements.size(), 1u);
+  EXPECT_TRUE(report.placements[0].blurred);
+  EXPECT_EQ(report.placements[0].filled_voxels, 0u);
+  EXPECT_EQ(report.filled_voxels, 0u);
+  // Within the threshold it fills (the test above).
+  CompletionReport plain;
+  ASSERT_TRUE(completeScene(f.store, "monday", params().merging, params().tsdf, &plain).ok());
+  EXPECT_FALSE(plain.placements[0].blurred);
+  EXPECT_GT(plain.filled_voxels, 0u);
+}
+
 TEST(CompleteScene, SingleSegmentModelsAddNothingAndAMissingSceneIsAnError) {
   Fixture f;
   ASSERT_TRUE(f.db->insertSegment("monday", rawSegment(1, kMonday, kFront)).ok());
