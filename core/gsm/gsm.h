@@ -141,9 +141,8 @@ class Gsm {
   size_t numLabels() const { return info_.size(); }
   const absl::flat_hash_map<Label, LabelInfo>& labels() const { return info_; }
   size_t labelBytes() const;
-  // The session's depth noise as measured against the map so far (surface_noise.h), and the
-  // σ(z) model it is measured against (ModelParams' noise fields; their defaults until set).
-  const SurfaceNoise& surfaceNoise() const { return surface_noise_; }
+  // The σ(z) model the session's depth noise is measured against (surface_noise.h; ModelParams'
+  // noise fields, their defaults until set).
   void setNoiseModel(const ModelParams& model) { surface_noise_ = SurfaceNoise(model); }
 
  private:

@@ -30,13 +30,15 @@ void forEachObserved(const tsdf::TsdfLayer& layer, Fn&& fn) {
 
 bool coloured(const Rgb8& c) { return int(c.r) + int(c.g) + int(c.b) >= kMinColourSum; }
 
+// An observed voxel within one voxel of the surface, with a colour.
+bool colouredSurface(const tsdf::TsdfVoxel& v, float voxel_size) {
+  return v.weight > 0.0f && std::abs(v.distance) <= voxel_size && coloured(v.color);
+}
+
 // The coloured surface voxel of `layer` nearest to p (in its frame), or null.
 const tsdf::TsdfVoxel* colouredSurfaceAt(const tsdf::TsdfLayer& layer, const Eigen::Vector3f& p) {
   const tsdf::TsdfVoxel* v = layer.voxel(layer.voxelIndexOf(p));
-  if (v == nullptr || !(v->weight > 0.0f) || std::abs(v->distance) > layer.voxelSize()) {
-    return nullptr;
-  }
-  return coloured(v->color) ? v : nullptr;
+  return v != nullptr && colouredSurface(*v, layer.voxelSize()) ? v : nullptr;
 }
 
 Rgb8 blendColour(const Rgb8& a, float wa, const Rgb8& b, float wb) {
@@ -67,11 +69,10 @@ ColourAgreement compareColours(const tsdf::TsdfLayer& fixed, const tsdf::TsdfLay
                                const Transform& T_fixed_moving) {
   ColourAgreement agreement;
   const Eigen::Isometry3f T_moving_fixed = T_fixed_moving.inverse().cast<float>();
-  const float surface = fixed.voxelSize();
   const Rgb8 grey{1, 1, 1};
   std::vector<double> distances, chromatic;
   forEachObserved(fixed, [&](const tsdf::VoxelIndex& v, const tsdf::TsdfVoxel& voxel) {
-    if (std::abs(voxel.distance) > surface || !coloured(voxel.color)) return;
+    if (!colouredSurface(voxel, fixed.voxelSize())) return;
     const tsdf::TsdfVoxel* other = colouredSurfaceAt(moving, T_moving_fixed * fixed.voxelCenter(v));
     if (other == nullptr) return;
     const double d = chromaticityDistance(voxel.color, other->color);
