@@ -30,6 +30,7 @@
 
 #include "absl/strings/str_format.h"
 #include "bench/bench_util.h"
+#include "bench/prefilter_recall.h"
 #include "core/common/grid_key.h"
 #include "core/common/mesh_distance.h"
 #include "core/completion/completion_score.h"
@@ -124,6 +125,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "database_eval: %s\n", std::string(db.status().message()).c_str());
     return 1;
   }
+  (*db)->measurePrefilterRecall(params.database.prefilter_epsilon > 0.0f);
+  PrefilterRecall against_exhaustive;
   std::map<database::SegmentKey, SegmentTruth> truth_of;
   std::vector<std::pair<std::string, gsm::RawSegment>> last_session;  // for --scale
   // Per session: every non-structure object, its shape and pose.
@@ -253,6 +256,7 @@ int main(int argc, char** argv) {
         ++skipped;
         continue;
       }
+      against_exhaustive.add(*report);
       if (report->matchable && !relevant.empty()) {
         size_t kept = 0;
         for (const auto& c : report->results) kept += relevant.count(c.model_id);
@@ -404,6 +408,10 @@ int main(int argc, char** argv) {
               "candidates (%zu of %zu); %zu of %zu inserts kept at least one\n",
               relevant_models ? 100.0 * relevant_kept / relevant_models : 0.0, relevant_kept,
               relevant_models, inserts_hit, inserts_with_relevant);
+  if (against_exhaustive.inserts > 0) {
+    std::printf("%s (epsilon %g)\n", against_exhaustive.summary().c_str(),
+                params.database.prefilter_epsilon);
+  }
   std::printf("\nMR split, seconds: descriptor matching %.1f, RANSAC %.1f, ICP %.1f\n",
               match_ms / 1000, ransac_ms / 1000, icp_ms / 1000);
   std::printf("\nTime of the database stage, seconds (paper table II; one insert at a time, "

@@ -6,19 +6,23 @@
 // the server's default Params. For each N (ascending) the store is filled up to N models, going on
 // from the previous N (store->addModel, not insertSegment: copies of 8 chair models of
 // bench/chair_model.h at 1 cm with 500 described keypoints, each with its raw segment), the
-// database opened on it (its prefilter loaded), then --inserts chairs inserted one at a time.
+// database opened on it (its prefilter loaded; every copy but the first of each kind has its
+// descriptors jittered, see jitter()), then --inserts chairs inserted one at a time.
 // Prints per N the fill and open seconds, insert latency (median, p90, p99, max, mean; with 50
 // inserts p99 is the second slowest), candidates per insert and the share merged, then the mean
 // time of each step. Not a test: figures vary with the machine.
 //
 //   build/bin/insert_bench [--models 1000,3000,10000] [--inserts 50] [--dir /tmp]
 //   build/bin/insert_bench --db postgresql://USER@HOST/EMPTY_DB [--models 1000,3000,10000,30000]
+//   build/bin/insert_bench --epsilon 2 --recall on   (database.prefilter_epsilon, and its recall
+//                                                     against the exhaustive vote per insert)
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -26,6 +30,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "bench/chair_model.h"
+#include "bench/prefilter_recall.h"
 #include "core/common/logging.h"
 #include "core/common/params.h"
 #include "core/common/transform.h"
@@ -74,6 +79,20 @@ Transform fillPose(int64_t i) {
   return poseFromXyzYaw({2.0 * double(i % 100), 10.0 + 2.0 * double(i / 100), 0.0}, 0.0);
 }
 
+// A copy's descriptors moved by N(0, kJitter) per bin (FPFH bins hold 0-100; the jitter moves a
+// descriptor by about 3, its similarity to the original drops by about 0.02, t_sim is 0.4): near
+// its kind's, no longer identical. Exact copies would tie for every nearest neighbour, which no
+// database holds (copies of one object merge into one model with many poses), and which turns
+// any kd-tree search into a scan of the ties.
+constexpr float kJitter = 0.5f;
+void jitter(std::vector<model::Fpfh>* descriptors, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> noise(0.0f, kJitter);
+  for (auto& d : *descriptors) {
+    for (float& x : d) x = std::max(0.0f, x + noise(rng));
+  }
+}
+
 // Adds copies of the kinds (one raw segment and one model, a transaction each) until the store
 // holds `target` active models; `next` numbers the copies across calls (label = number + 1).
 Status fill(storage::Store* store, const std::vector<Kind>& kinds, size_t active, size_t target,
@@ -98,6 +117,7 @@ Status fill(storage::Store* store, const std::vector<Kind>& kinds, size_t active
     record.voxel_parts.assign(record.voxels.size(), label);
     OBJDB_RETURN_IF_ERROR(store->putRawSegment(record));
     model::ObjectModel copy = model::cloneModel(kind.model);
+    if (i >= kKinds) jitter(&copy.descriptors, uint32_t(i));
     copy.observations = {{kFillSession, label, T_world_segment, Transform::Identity()}};
     OBJDB_RETURN_IF_ERROR(store->addModel(std::move(copy)).status());
     if ((added + 1) % 1000 == 0) {
@@ -136,10 +156,13 @@ struct Options {
   std::vector<size_t> models = {1000, 3000, 10000};
   int inserts = 50;
   std::string target;  // SQLite path or PostgreSQL URI
+  float epsilon = -1.0f;  // database.prefilter_epsilon (< 0: the default)
+  bool recall = false;    // also the exhaustive vote per insert, for the prefilter's recall
 };
 
 // One N: its fill, open and inserts.
 struct Row {
+  PrefilterRecall recall;
   size_t models = 0;
   double fill_s = 0, open_s = 0;
   std::vector<double> ms;  // wall time of each insert
@@ -153,7 +176,8 @@ double quantile(std::vector<double> v, double q) {
 }
 
 Status run(const Options& options) {
-  const Params params;  // the server's defaults (objdb-server without --config)
+  Params params;  // the server's defaults (objdb-server without --config)
+  if (options.epsilon >= 0.0f) params.database.prefilter_epsilon = options.epsilon;
   std::fprintf(stderr, "insert_bench: building %d chair models\n", kKinds);
   std::vector<Kind> kinds;
   for (int v = 0; v < kKinds; ++v) {
@@ -184,10 +208,10 @@ Status run(const Options& options) {
   };
 
   std::printf("insert_bench: %s; the server's default Params (database.threads %d, "
-              "max_candidates %d, stop_after_accepted %d); chairs at 1 cm, 500 described "
-              "keypoints per filled model\n",
+              "max_candidates %d, stop_after_accepted %d, prefilter_epsilon %g); chairs at 1 cm, "
+              "500 described keypoints per filled model\n",
               store->describe().c_str(), params.database.threads, params.database.max_candidates,
-              params.database.stop_after_accepted);
+              params.database.stop_after_accepted, params.database.prefilter_epsilon);
   std::printf("2 cores, noisy; figures vary\n\n");
   std::printf("%9s %8s %8s %10s %8s %8s %8s %8s %11s %7s\n", "N models", "fill s", "open s",
               "median ms", "p90", "p99", "max", "mean", "candidates", "merged");
@@ -206,6 +230,7 @@ Status run(const Options& options) {
     t = Clock::now();
     OBJDB_ASSIGN_OR_RETURN(db, database::ObjectDatabase::create(params, store.get()));
     row.open_s = secondsSince(t);
+    db->measurePrefilterRecall(options.recall);
     for (int j = 0; j < options.inserts; ++j, ++next_insert) {
       const gsm::RawSegment segment = benchSegment(next_insert, bench_scene.get());
       t = Clock::now();
@@ -223,6 +248,7 @@ Status run(const Options& options) {
         row.scenes_missing += r.scenes_missing;
       }
       row.timings += report->timings;
+      row.recall.add(*report);
     }
     double mean = 0;
     for (const double ms : row.ms) mean += ms;
@@ -241,6 +267,8 @@ Status run(const Options& options) {
                   "", (t.cloud_ms + t.keypoints_ms + t.descriptors_ms) / n, t.prefilter_ms / n,
                   t.load_ms / n, t.match_register_ms / n, t.model_verify_ms / n,
                   t.scene_verify_ms / n, t.store_ms / n);
+      // Copies tie: the exhaustive vote breaks ties by model id, the approximate by its search.
+      if (options.recall) std::printf("%9s %s\n", "", row.recall.summary().c_str());
     }
     std::fflush(stdout);
     rows.push_back(std::move(row));
@@ -298,13 +326,19 @@ int main(int argc, char** argv) {
       dir = value;
     } else if (name == "--db") {
       db = value;
+    } else if (name == "--epsilon") {
+      ok = absl::SimpleAtof(value, &options.epsilon) && options.epsilon >= 0.0f;
+    } else if (name == "--recall") {
+      ok = value == "on" || value == "off";
+      options.recall = value == "on";
     } else {
       ok = false;
     }
   }
   if (!ok) {
     std::fprintf(stderr, "usage: insert_bench [--models N,N,... (ascending, each in [1, "
-                 "1000000])] [--inserts 1..100000] [--dir DIR] [--db SQLITE_FILE|POSTGRES_URI]\n");
+                 "1000000])] [--inserts 1..100000] [--dir DIR] [--db SQLITE_FILE|POSTGRES_URI] "
+                 "[--epsilon E] [--recall on|off]\n");
     return 2;
   }
   setLogLevel("warn");

@@ -51,7 +51,7 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
 }
 
 ObjectDatabase::ObjectDatabase(const Params& params, ModelStore* store)
-    : params_(params), store_(store) {}
+    : params_(params), store_(store), prefilter_(params.database.prefilter_epsilon) {}
 
 model::ModelBuildParams ObjectDatabase::buildParams(float observation_depth_m) const {
   model::ModelBuildParams p;
@@ -214,14 +214,16 @@ std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
   return indices_.emplace(model.id, std::move(index)).first->second;
 }
 
-StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model) {
+StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model,
+                                                             bool exhaustive) {
   std::lock_guard lock(mutex_);
   std::map<int64_t, int> votes;
   std::set<int64_t> voted;
+  const int k = params_.database.prefilter_neighbours;
   for (const auto& d : model.descriptors) {
     voted.clear();
     for (const auto& [owner, similarity] :
-         prefilter_.nearest(d, params_.database.prefilter_neighbours)) {
+         exhaustive ? prefilter_.nearestExhaustive(d, k) : prefilter_.nearest(d, k)) {
       if (similarity < params_.matching.similarity_threshold) continue;
       if (owner != model.id && voted.insert(owner).second) ++votes[owner];
     }
@@ -527,6 +529,10 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
     auto t = Clock::now();
     OBJDB_ASSIGN_OR_RETURN(std::vector<int64_t> ranked, candidatesFor(incoming));
     report.timings.prefilter_ms = msSince(t);
+    if (measure_prefilter_) {
+      OBJDB_ASSIGN_OR_RETURN(report.exhaustive_candidates, candidatesFor(incoming, true));
+      report.prefilter_candidates = ranked;
+    }
     t = Clock::now();
     candidates.reserve(ranked.size());
     for (int64_t id : ranked) {

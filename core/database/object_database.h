@@ -114,6 +114,9 @@ struct InsertReport {
     return ids;
   }
   InsertTimings timings;
+  // ObjectDatabase::measurePrefilterRecall only (else empty): the prefilter's candidate ids as
+  // the insert used them, and those of the exhaustive vote, most voted first.
+  std::vector<int64_t> prefilter_candidates, exhaustive_candidates;
 };
 
 class ObjectDatabase {
@@ -139,7 +142,14 @@ class ObjectDatabase {
   StatusOr<int64_t> withdrawSegment(const std::string& session, gsm::Label label);
 
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
-  StatusOr<std::vector<int64_t>> candidatesFor(const model::ObjectModel& model);
+  // `exhaustive`: the vote over every stored descriptor's exact distance (linear in their
+  // number), whatever DatabaseParams::prefilter_epsilon says.
+  StatusOr<std::vector<int64_t>> candidatesFor(const model::ObjectModel& model,
+                                               bool exhaustive = false);
+  // For benchmarks: every insert also runs the exhaustive vote and reports both candidate lists
+  // (InsertReport::prefilter_candidates, exhaustive_candidates), so the recall of an approximate
+  // prefilter can be measured on the inserts as they happen.
+  void measurePrefilterRecall(bool on) { measure_prefilter_ = on; }
 
  private:
   ObjectDatabase(const Params& params, ModelStore* store);
@@ -208,6 +218,7 @@ class ObjectDatabase {
                                       const LiveScenes& live);
   StatusOr<int64_t> withdrawLocked(const std::string& session, gsm::Label label);
   int64_t applied_seq_ = 0;
+  bool measure_prefilter_ = false;
 };
 
 }  // namespace objdb::database

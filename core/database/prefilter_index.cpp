@@ -4,6 +4,28 @@
 #include <tuple>
 
 namespace objdb::database {
+namespace {
+
+float squaredDistance(const model::Fpfh& a, const model::Fpfh& b) {
+  float d2 = 0.0f;
+  for (size_t c = 0; c < a.size(); ++c) {
+    const float e = a[c] - b[c];
+    d2 += e * e;
+  }
+  return d2;
+}
+
+}  // namespace
+
+std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearestOf(std::vector<Candidate> found,
+                                                                 int k) {
+  std::sort(found.begin(), found.end());
+  if (found.size() > size_t(k)) found.resize(size_t(k));
+  std::vector<Neighbour> out;
+  out.reserve(found.size());
+  for (const auto& [d2, owner, sequence, similarity] : found) out.push_back({owner, similarity});
+  return out;
+}
 
 bool PrefilterIndex::alive(const Tree& tree, size_t i) const {
   const auto it = where_.find(tree.owner[i]);
@@ -26,7 +48,7 @@ std::unique_ptr<PrefilterIndex::Tree> PrefilterIndex::rebuild(
     if (i == 0 || out->owner[i] != out->owner[i - 1]) where_[out->owner[i]].tree = out.get();
   }
   if (out->descriptors.empty()) return nullptr;
-  out->index = std::make_unique<matching::DescriptorIndex>(out->descriptors);
+  out->index = std::make_unique<matching::DescriptorIndex>(out->descriptors, epsilon_);
   rebuilt_ += out->descriptors.size();
   return out;
 }
@@ -66,7 +88,7 @@ void PrefilterIndex::load(
     live_ += descriptors->size();
   }
   if (tree->descriptors.empty()) return;
-  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors);
+  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors, epsilon_);
   rebuilt_ += tree->descriptors.size();
   trees_.push_back(std::move(tree));
 }
@@ -79,7 +101,7 @@ void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors
   tree->owner.assign(descriptors.size(), id);
   const uint64_t first = next_sequence_;
   for (size_t i = 0; i < descriptors.size(); ++i) tree->sequence.push_back(next_sequence_++);
-  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors);
+  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors, epsilon_);
   rebuilt_ += descriptors.size();
   where_[id] = Place{tree.get(), first, descriptors.size()};
   live_ += descriptors.size();
@@ -100,7 +122,7 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh
                                                                int k) const {
   // The trees' k nearest are by Euclidean distance, so the merge is too: (distance², owner,
   // sequence, similarity).
-  std::vector<std::tuple<float, int64_t, uint64_t, float>> found;
+  std::vector<Candidate> found;
   if (k <= 0) return {};
   for (const auto& tree : trees_) {
     // The k nearest live ones of this tree: ask for k (more when it has dead ones), and again for
@@ -119,20 +141,40 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh
     for (const auto& [i, similarity] : hits) {
       if (!alive(*tree, i) || taken == size_t(k)) continue;
       ++taken;
-      float d2 = 0.0f;
-      for (size_t c = 0; c < query.size(); ++c) {
-        const float e = query[c] - tree->descriptors[i][c];
-        d2 += e * e;
-      }
-      found.emplace_back(d2, tree->owner[i], tree->sequence[i], similarity);
+      found.emplace_back(squaredDistance(query, tree->descriptors[i]), tree->owner[i],
+                         tree->sequence[i], similarity);
     }
   }
-  std::sort(found.begin(), found.end());
-  if (found.size() > size_t(k)) found.resize(size_t(k));
-  std::vector<Neighbour> out;
-  out.reserve(found.size());
-  for (const auto& [d2, owner, sequence, similarity] : found) out.push_back({owner, similarity});
-  return out;
+  return nearestOf(std::move(found), k);
+}
+
+std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearestExhaustive(
+    const model::Fpfh& query, int k) const {
+  if (k <= 0) return {};
+  struct Scanned {
+    Candidate key;
+    const model::Fpfh* descriptor;
+    bool operator<(const Scanned& o) const { return key < o.key; }
+  };
+  std::vector<Scanned> scanned;
+  scanned.reserve(live_);
+  for (const auto& tree : trees_) {
+    for (size_t i = 0; i < tree->descriptors.size(); ++i) {
+      if (!alive(*tree, i)) continue;
+      scanned.push_back({{squaredDistance(query, tree->descriptors[i]), tree->owner[i],
+                          tree->sequence[i], 0.0f},
+                         &tree->descriptors[i]});
+    }
+  }
+  const size_t keep = std::min(scanned.size(), size_t(k));
+  std::partial_sort(scanned.begin(), scanned.begin() + std::ptrdiff_t(keep), scanned.end());
+  std::vector<Candidate> found;
+  found.reserve(keep);
+  for (size_t i = 0; i < keep; ++i) {
+    found.push_back(scanned[i].key);
+    std::get<3>(found.back()) = matching::fpfhSimilarity(query, *scanned[i].descriptor);
+  }
+  return nearestOf(std::move(found), k);
 }
 
 }  // namespace objdb::database

@@ -5,12 +5,16 @@
 // the older holds at most twice the newer's descriptors, so each descriptor is rebuilt O(log n)
 // times over its life. A model taken out is a tombstone in its tree until the dead reach half of
 // that tree, which is then rebuilt from its live descriptors. Queries ask every tree and merge:
-// the k nearest live descriptors overall, exactly what one tree over them all returns.
+// the k nearest live descriptors overall, exactly what one tree over them all returns. With an
+// epsilon > 0 each tree's search is approximate (matching::DescriptorIndex): the cost of a query
+// then grows far slower than the number of descriptors, and nearestExhaustive measures what it
+// misses.
 #pragma once
 
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -26,6 +30,8 @@ class PrefilterIndex {
     float similarity = 0.0f;
   };
 
+  explicit PrefilterIndex(float epsilon = 0.0f) : epsilon_(epsilon) {}
+
   // Models (id, descriptors) in one tree, into an empty index (a database opened on its store).
   void load(const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models);
   // Adds model `id`'s descriptors, replacing those it had.
@@ -36,6 +42,9 @@ class PrefilterIndex {
   // The k nearest live descriptors to `query` (Euclidean, as the kd-trees search), nearest first
   // (ties: lower owner, then the older descriptor), with their similarity to it.
   std::vector<Neighbour> nearest(const model::Fpfh& query, int k) const;
+  // The same by a scan of every live descriptor: the exact answer whatever epsilon is, in time
+  // linear in size() (for measuring the approximate search's recall).
+  std::vector<Neighbour> nearestExhaustive(const model::Fpfh& query, int k) const;
 
   size_t size() const { return live_; }  // live descriptors
   size_t trees() const { return trees_.size(); }
@@ -52,6 +61,9 @@ class PrefilterIndex {
     size_t dead = 0;
     size_t live() const { return descriptors.size() - dead; }
   };
+  // (distance², owner, sequence, similarity): the order of the answer, nearest first.
+  using Candidate = std::tuple<float, int64_t, uint64_t, float>;
+  static std::vector<Neighbour> nearestOf(std::vector<Candidate> found, int k);
   // Rebuilds `trees` into one tree of their live descriptors (null when none is left).
   std::unique_ptr<Tree> rebuild(std::vector<std::unique_ptr<Tree>> trees);
   bool alive(const Tree& tree, size_t i) const;
@@ -63,6 +75,7 @@ class PrefilterIndex {
     size_t count = 0;
   };
   std::map<int64_t, Place> where_;  // live model → where its descriptors are
+  float epsilon_ = 0.0f;
   uint64_t next_sequence_ = 0;
   size_t live_ = 0;
   size_t rebuilt_ = 0;

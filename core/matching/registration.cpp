@@ -62,9 +62,10 @@ struct DescriptorIndex::Tree {
   pcl::KdTreeFLANN<pcl::FPFHSignature33> kdtree;
 };
 
-DescriptorIndex::DescriptorIndex(const std::vector<model::Fpfh>& descriptors)
+DescriptorIndex::DescriptorIndex(const std::vector<model::Fpfh>& descriptors, float epsilon)
     : descriptors_(descriptors), tree_(std::make_unique<Tree>()) {
   if (descriptors_.empty()) return;
+  if (epsilon > 0.0f) tree_->kdtree.setEpsilon(epsilon);
   auto cloud = std::make_shared<pcl::PointCloud<pcl::FPFHSignature33>>();
   cloud->resize(descriptors_.size());
   for (size_t i = 0; i < descriptors_.size(); ++i) {

@@ -24,10 +24,12 @@ namespace objdb::matching {
 // the paper gives t_sim = 0.4 without one.
 float fpfhSimilarity(const model::Fpfh& a, const model::Fpfh& b);
 
-// A kd-tree over one model's descriptors, built once and queried by every new model.
+// A kd-tree over one model's descriptors, built once and queried by every new model. With
+// `epsilon` > 0 the search is approximate (FLANN's (1 + ε) bound: a branch is skipped unless it
+// may hold a descriptor closer than the k-th found so far divided by 1 + ε), and deterministic.
 class DescriptorIndex {
  public:
-  explicit DescriptorIndex(const std::vector<model::Fpfh>& descriptors);
+  explicit DescriptorIndex(const std::vector<model::Fpfh>& descriptors, float epsilon = 0.0f);
   ~DescriptorIndex();
   DescriptorIndex(DescriptorIndex&&) noexcept;
   DescriptorIndex& operator=(DescriptorIndex&&) noexcept;

@@ -191,6 +191,34 @@ TEST(ObjectDatabase, AChairAndAFireExtinguisherAreNeverMerged) {
   for (const auto& c : r->results) EXPECT_FALSE(c.accepted) << c.model_id;
 }
 
+TEST(ObjectDatabase, TheApproximatePrefilterKeepsTheExactVotesCandidates) {
+  Params p = params();
+  ASSERT_GT(p.database.prefilter_epsilon, 0.0f);  // the default searches approximately
+  Fixture f(p);
+  const World c{chair(), pose(0, 0, 0.2)};
+  const World e{extinguisher(), pose(1.0, 0.5, 1.0)};
+  const World b{boxWithBall(), pose(-1.0, 0.8, 0.7)};
+  const World again{chair(), pose(0.2, -1.2, 1.9)};
+  EXPECT_TRUE(
+      f.store.putScene("s", std::make_shared<tsdf::TsdfLayer>(sceneGrid({c, e, b, again}))).ok());
+  auto first = f.db->insertSegment("s", segment(1, c));
+  ASSERT_TRUE(first.ok()) << first.status();
+  ASSERT_TRUE(f.db->insertSegment("s", segment(2, e)).ok());
+  // Off (the default): no exhaustive vote is run, nothing is reported.
+  auto plain = f.db->insertSegment("s", segment(3, b));
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  EXPECT_TRUE(plain->exhaustive_candidates.empty());
+  EXPECT_TRUE(plain->prefilter_candidates.empty());
+  f.db->measurePrefilterRecall(true);
+  auto r = f.db->insertSegment("s", segment(4, again));
+  ASSERT_TRUE(r.ok()) << r.status();
+  ASSERT_FALSE(r->exhaustive_candidates.empty());
+  EXPECT_EQ(r->prefilter_candidates, r->exhaustive_candidates);
+  EXPECT_EQ(r->exhaustive_candidates.front(), first->model_id);
+  EXPECT_TRUE(r->merged);
+  EXPECT_EQ(r->model_id, first->model_id);
+}
+
 TEST(ObjectDatabase, PlanarSegmentsAreStoredButNeverMatched) {
   Fixture f;
   const Sdf floor = boxSdf({0, 0, -0.05f}, {0.5f, 0.5f, 0.05f});

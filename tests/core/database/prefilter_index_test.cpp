@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <random>
 #include <tuple>
@@ -80,6 +81,8 @@ TEST(PrefilterIndex, AnswersAsOneTreeOverTheLiveDescriptorsThroughPutsReplacemen
       for (const int k : {1, 8, 64}) {
         ASSERT_EQ(owners(index.nearest(q, k)), reference.nearest(q, k))
             << "step " << step << ", k " << k;
+        ASSERT_EQ(owners(index.nearestExhaustive(q, k)), reference.nearest(q, k))
+            << "step " << step << ", k " << k;
       }
     }
   }
@@ -121,6 +124,74 @@ TEST(PrefilterIndex, LoadedModelsAreFoundAndReplacedLikePutOnes) {
   index.erase(1);
   EXPECT_EQ(index.size(), 0u);
   EXPECT_TRUE(index.nearest(a[0], 5).empty());
+}
+
+float squared(const model::Fpfh& a, const model::Fpfh& b) {
+  float d2 = 0.0f;
+  for (size_t c = 0; c < a.size(); ++c) d2 += (a[c] - b[c]) * (a[c] - b[c]);
+  return d2;
+}
+
+// Descriptors of `models` models, each a cloud of `per_model` around a centre of its own.
+std::map<int64_t, std::vector<model::Fpfh>> clusteredModels(std::mt19937* rng, int models,
+                                                            size_t per_model, float spread) {
+  std::normal_distribution<float> noise(0.0f, spread);
+  std::map<int64_t, std::vector<model::Fpfh>> out;
+  for (int m = 1; m <= models; ++m) {
+    const model::Fpfh centre = randomDescriptors(rng, 1)[0];
+    auto& ds = out[m];
+    for (size_t i = 0; i < per_model; ++i) {
+      model::Fpfh d = centre;
+      for (float& x : d) x += noise(*rng);
+      ds.push_back(d);
+    }
+  }
+  return out;
+}
+
+TEST(PrefilterIndex, AnApproximateSearchStaysWithinItsBoundAndFindsTheRightModels) {
+  std::mt19937 rng(5);
+  const auto models = clusteredModels(&rng, 60, 40, 4.0f);
+  const float epsilon = 2.0f;
+  PrefilterIndex approximate(epsilon), again(epsilon);
+  Reference reference;
+  for (const auto& [id, ds] : models) {
+    approximate.put(id, ds);
+    again.put(id, ds);
+    reference.put(id, ds);
+  }
+  size_t same_owner = 0, asked = 0;
+  for (const auto& [id, ds] : models) {
+    for (size_t i = 0; i < ds.size(); i += 10) {
+      model::Fpfh q = ds[i];
+      for (float& x : q) x += 1.0f;  // a nearby view of the same surface
+      const int k = 20;
+      const auto found = approximate.nearest(q, k);
+      const auto exact = approximate.nearestExhaustive(q, k);
+      ASSERT_EQ(found.size(), size_t(k));
+      ASSERT_EQ(owners(exact), reference.nearest(q, k));
+      // Deterministic: the same puts answer the same.
+      ASSERT_EQ(owners(found), owners(again.nearest(q, k)));
+      // FLANN's bound on squared distances: none farther than (1 + ε) times the exact k-th.
+      std::vector<float> all;
+      for (const auto& [owner, entries] : reference.live) {
+        for (const auto& e : entries) all.push_back(squared(q, e.d));
+      }
+      std::nth_element(all.begin(), all.begin() + (k - 1), all.end());
+      const float kth = all[size_t(k - 1)];
+      for (const auto& n : found) {
+        float nearest_of_owner = std::numeric_limits<float>::max();
+        for (const auto& d : models.at(n.owner)) {
+          nearest_of_owner = std::min(nearest_of_owner, squared(q, d));
+        }
+        EXPECT_LE(nearest_of_owner, (1.0f + epsilon) * kth * 1.0001f);
+      }
+      for (const auto& n : found) same_owner += n.owner == id ? 1 : 0;
+      asked += found.size();
+    }
+  }
+  // The vote sees what the exact search sees: the query's own model.
+  EXPECT_EQ(same_owner, asked);
 }
 
 }  // namespace
