@@ -554,7 +554,9 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
   std::vector<InsertTimings> per_candidate(candidates.size());
   const Thresholds thresholds = thresholdsFor(segment.observation_depth_m, segment.noise_scale);
   // Waves of `threads` candidates in prefilter order; a wave starts only while fewer than
-  // stop_after_accepted have been accepted, so the outcome never depends on thread timing.
+  // stop_after_accepted have been accepted. A wave may evaluate past the candidate at which one
+  // thread would have stopped; the results are then decided in candidate order (below), so the
+  // outcome depends neither on thread timing nor on the number of threads.
   const size_t wave = size_t(std::max(1, params_.database.threads));
   const size_t stop = size_t(params_.database.stop_after_accepted);
   size_t accepted = 0;
@@ -584,6 +586,21 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
     }
     for (size_t c = begin; c < end; ++c) accepted += report.results[c].accepted ? 1 : 0;
   }
+  if (stop > 0) {
+    // What one thread would have done: nothing after the stop-th acceptance counts.
+    size_t in_order = 0;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+      if (in_order >= stop && report.results[c].stage != "skipped") {
+        report.results[c] = CandidateResult{};
+        report.results[c].model_id = candidates[c];
+        report.results[c].stage = "skipped";
+        report.results[c].reason = absl::StrFormat(
+            "not counted: %d candidates with more votes were accepted (evaluated alongside them)",
+            in_order);
+      }
+      in_order += report.results[c].accepted ? 1 : 0;
+    }
+  }
   for (const auto& r : report.results) {
     if (r.accepted || r.stage == "skipped") continue;
     logger("database")->debug("segment {}/{}: candidate object {} rejected at the {} check: {}",
@@ -596,13 +613,20 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
   }
 
   const auto t_store = Clock::now();
-  // The accepted candidate with the lowest e_TSDF (ties: the older model).
+  // The accepted candidate with the lowest e_TSDF (ties: the older model). e_TSDF values within
+  // kTiedRmseM tie: copies of one model differ in the last bits only, with the order the hashed
+  // grid is summed in, which changes from run to run.
+  constexpr double kTiedRmseM = 1e-7;
   const CandidateResult* best = nullptr;
   for (const auto& r : report.results) {
     if (!r.accepted) continue;
-    if (best == nullptr || r.model_verdict.agreement.rmse < best->model_verdict.agreement.rmse) {
-      best = &r;
-    }
+    const bool better =
+        best == nullptr ||
+        r.model_verdict.agreement.rmse < best->model_verdict.agreement.rmse - kTiedRmseM ||
+        (std::abs(r.model_verdict.agreement.rmse - best->model_verdict.agreement.rmse) <=
+             kTiedRmseM &&
+         r.model_id < best->model_id);
+    if (better) best = &r;
   }
   if (best == nullptr) {
     MatchEntry entry = matchEntryOf(incoming);

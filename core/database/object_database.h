@@ -32,8 +32,9 @@ struct CandidateResult {
   int64_t model_id = 0;
   bool accepted = false;
   std::string stage;   // where it stopped: "registration", "model", "colour", "scene",
-                       // "skipped" (not evaluated: stop_after_accepted reached), or "" if
-                       // accepted
+                       // "skipped" (stop_after_accepted reached before it, in candidate order:
+                       // not evaluated, or evaluated by a parallel wave and not counted), or ""
+                       // if accepted
   std::string reason;
   matching::Registration registration;
   matching::Verdict model_verdict;
