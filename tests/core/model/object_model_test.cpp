@@ -1,6 +1,7 @@
 #include "core/model/object_model.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 
@@ -85,6 +86,11 @@ TEST(BuildModel, APlanarSegmentIsFlaggedAndNotDescribed) {
   EXPECT_FALSE(model->matchable(ModelParams{}));
 }
 
+// How near a salient keypoint lies to the corner or edge that makes it salient (voxels are 1 cm;
+// r_H is 3 cm).
+constexpr float kCornerRadius = 0.04f;
+constexpr float kEdgeRadius = 0.04f;
+
 TEST(BuildModel, ABoxGetsKeypointsAtItsCornersAndDescriptors) {
   auto grid = sdfGrid(boxSdf({0, 0, 0}, {0.2f, 0.15f, 0.1f}), Eigen::Vector3f::Constant(-0.3f),
                       Eigen::Vector3f::Constant(0.3f), kVoxel, 3 * kVoxel);
@@ -95,15 +101,30 @@ TEST(BuildModel, ABoxGetsKeypointsAtItsCornersAndDescriptors) {
   ASSERT_TRUE(model->matchable(ModelParams{}));
   ASSERT_EQ(model->descriptors.size(), model->keypoint_indices.size());
   EXPECT_GE(model->keypoint_indices.size(), 8u);
-  // Some keypoint sits near each of the 8 corners (within 5 cm).
+  // ISS ∪ Harris3D alone (uniform_spacing_m would put a point within 5 cm of anything): some
+  // keypoint sits near each of the 8 corners, and none lies in the middle of a face.
+  KeypointParams detectors;
+  detectors.uniform_spacing_m = 0.0f;
+  const std::vector<uint32_t> salient = detectKeypoints(model->cloud, detectors);
+  ASSERT_FALSE(salient.empty());
   for (int c = 0; c < 8; ++c) {
     const Eigen::Vector3f corner((c & 1) ? 0.2f : -0.2f, (c & 2) ? 0.15f : -0.15f,
                                  (c & 4) ? 0.1f : -0.1f);
     float nearest = INFINITY;
-    for (size_t k = 0; k < model->keypoint_indices.size(); ++k) {
-      nearest = std::min(nearest, (model->keypoint(k) - corner).norm());
+    for (const uint32_t i : salient) {
+      nearest = std::min(nearest, (model->cloud.points[i] - corner).norm());
     }
-    EXPECT_LT(nearest, 0.05f) << "corner " << corner.transpose();
+    EXPECT_LT(nearest, kCornerRadius) << "corner " << corner.transpose();
+  }
+  for (const uint32_t i : salient) {
+    // Distance to the nearest edge of the box: a face's middle is far from all of them.
+    const Eigen::Vector3f p = model->cloud.points[i].cwiseAbs();
+    const Eigen::Vector3f half(0.2f, 0.15f, 0.1f);
+    const Eigen::Vector3f gap = (half - p).cwiseAbs();
+    std::array<float, 3> g = {gap.x(), gap.y(), gap.z()};
+    std::sort(g.begin(), g.end());
+    EXPECT_LT(g[1], kEdgeRadius) << "keypoint at " << model->cloud.points[i].transpose()
+                                 << " is on no edge";
   }
   // FPFH: three 11-bin sub-histograms, each normalised to 100.
   for (const Fpfh& d : model->descriptors) {
