@@ -244,7 +244,7 @@ struct DatabaseParams {
   // The nearest descriptors are searched approximately when > 0: FLANN's (1 + ε) bound in each
   // kd-tree (deterministic). An exact search (0) in 33-D FPFH space visits most of the tree: its
   // time grows with the stored descriptors. ε 2 kept all the exact vote's candidates on the
-  // lounge and cut the prefilter at 10,000 chair models about 15-fold (docs/database.md).
+  // lounge and cut the prefilter at 10,000 chair models about 10-fold (docs/database.md).
   float prefilter_epsilon = 2.0f;
   // 16 (was 32) measured: the same recall on the lounge (~10 candidates per insert on average);
   // the worst insert into a database of 1,000 models drops below 1 s.

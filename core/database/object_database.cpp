@@ -217,13 +217,28 @@ std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
 StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model,
                                                              bool exhaustive) {
   std::lock_guard lock(mutex_);
+  const int k = params_.database.prefilter_neighbours;
+  // The searches on database.threads threads (the index is only read), the votes in descriptor
+  // order: the same candidates on any number of threads.
+  const size_t n = model.descriptors.size();
+  std::vector<std::vector<PrefilterIndex::Neighbour>> found(n);
+  std::atomic<size_t> next{0};
+  auto search = [&] {
+    for (size_t i = next++; i < n; i = next++) {
+      const model::Fpfh& d = model.descriptors[i];
+      found[i] = exhaustive ? prefilter_.nearestExhaustive(d, k) : prefilter_.nearest(d, k);
+    }
+  };
+  const size_t threads = std::min(n, size_t(std::max(1, params_.database.threads)));
+  std::vector<std::thread> pool;
+  for (size_t t = 1; t < threads; ++t) pool.emplace_back(search);
+  search();
+  for (auto& thread : pool) thread.join();
   std::map<int64_t, int> votes;
   std::set<int64_t> voted;
-  const int k = params_.database.prefilter_neighbours;
-  for (const auto& d : model.descriptors) {
+  for (const auto& neighbours : found) {
     voted.clear();
-    for (const auto& [owner, similarity] :
-         exhaustive ? prefilter_.nearestExhaustive(d, k) : prefilter_.nearest(d, k)) {
+    for (const auto& [owner, similarity] : neighbours) {
       if (similarity < params_.matching.similarity_threshold) continue;
       if (owner != model.id && voted.insert(owner).second) ++votes[owner];
     }
