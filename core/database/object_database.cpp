@@ -42,7 +42,7 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
     for (const auto& key : e.segments) db->segment_model_[key] = e.id;
     if (e.matchable(params.model)) matchable.emplace_back(e.id, &e.descriptors);
   }
-  db->prefilter_.load(matchable);
+  db->prefilter_.load(matchable, params.database.threads);
   for (const auto& skipped : entries.skipped) {
     logger("database")->error("object database: a stored model is unreadable and left out: {}",
                               std::string(skipped.message()));

@@ -1,6 +1,7 @@
 #include "core/database/prefilter_index.h"
 
 #include <algorithm>
+#include <thread>
 #include <tuple>
 
 namespace objdb::database {
@@ -74,12 +75,22 @@ void PrefilterIndex::erase(int64_t id) {
 }
 
 void PrefilterIndex::load(
-    const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models) {
-  auto tree = std::make_unique<Tree>();
+    const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models, int threads) {
+  size_t total = 0;
+  for (const auto& [id, descriptors] : models) total += descriptors->size();
+  // `threads` trees of about equal size (a model's descriptors stay in one), built in parallel.
+  const size_t parts = size_t(std::max(1, threads));
+  const size_t per_tree = std::max<size_t>(1, (total + parts - 1) / parts);
+  std::vector<std::unique_ptr<Tree>> loaded;
+  loaded.push_back(std::make_unique<Tree>());
   for (const auto& [id, descriptors] : models) {
     erase(id);
     if (descriptors->empty()) continue;
-    where_[id] = Place{tree.get(), next_sequence_, descriptors->size()};
+    if (loaded.back()->descriptors.size() >= per_tree && loaded.size() < parts) {
+      loaded.push_back(std::make_unique<Tree>());
+    }
+    Tree* tree = loaded.back().get();
+    where_[id] = Place{tree, next_sequence_, descriptors->size()};
     for (const auto& d : *descriptors) {
       tree->descriptors.push_back(d);
       tree->owner.push_back(id);
@@ -87,10 +98,18 @@ void PrefilterIndex::load(
     }
     live_ += descriptors->size();
   }
-  if (tree->descriptors.empty()) return;
-  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors, epsilon_);
-  rebuilt_ += tree->descriptors.size();
-  trees_.push_back(std::move(tree));
+  std::vector<std::thread> builders;
+  for (const auto& tree : loaded) {
+    if (tree->descriptors.empty()) continue;
+    rebuilt_ += tree->descriptors.size();
+    builders.emplace_back([this, t = tree.get()] {
+      t->index = std::make_unique<matching::DescriptorIndex>(t->descriptors, epsilon_);
+    });
+  }
+  for (auto& builder : builders) builder.join();
+  for (auto& tree : loaded) {
+    if (!tree->descriptors.empty()) trees_.push_back(std::move(tree));
+  }
 }
 
 void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors) {

@@ -32,8 +32,11 @@ class PrefilterIndex {
 
   explicit PrefilterIndex(float epsilon = 0.0f) : epsilon_(epsilon) {}
 
-  // Models (id, descriptors) in one tree, into an empty index (a database opened on its store).
-  void load(const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models);
+  // Models (id, descriptors) into an empty index (a database opened on its store): in `threads`
+  // trees of about equal size, built in parallel (one tree over 5 million descriptors takes half
+  // a minute to build).
+  void load(const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models,
+            int threads = 1);
   // Adds model `id`'s descriptors, replacing those it had.
   void put(int64_t id, const std::vector<model::Fpfh>& descriptors);
   // Takes model `id`'s descriptors out (nothing when it has none here): they stay as tombstones

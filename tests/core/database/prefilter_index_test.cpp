@@ -109,6 +109,36 @@ TEST(PrefilterIndex, BuildsEachDescriptorLogarithmicallyOftenNotOncePerInsert) {
   for (const auto& n : found) EXPECT_EQ((n.owner - 1) % 8, 0);
 }
 
+TEST(PrefilterIndex, ALoadOnTwoThreadsAnswersAsOnOne) {
+  std::mt19937 rng(13);
+  std::vector<std::vector<model::Fpfh>> descriptors;
+  std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> models;
+  for (int m = 0; m < 30; ++m) descriptors.push_back(randomDescriptors(&rng, size_t(5 + m % 7)));
+  Reference reference;
+  for (int m = 0; m < 30; ++m) {
+    models.emplace_back(m + 1, &descriptors[size_t(m)]);
+    reference.put(m + 1, descriptors[size_t(m)]);
+  }
+  PrefilterIndex one, two;
+  one.load(models, 1);
+  two.load(models, 2);
+  EXPECT_EQ(one.trees(), 1u);
+  EXPECT_EQ(two.trees(), 2u);
+  EXPECT_EQ(two.size(), one.size());
+  for (const auto& q : randomDescriptors(&rng, 20)) {
+    EXPECT_EQ(owners(two.nearest(q, 16)), reference.nearest(q, 16));
+    EXPECT_EQ(owners(two.nearest(q, 16)), owners(one.nearest(q, 16)));
+  }
+  // Changes after the load work on either.
+  two.erase(3);
+  reference.live.erase(3);
+  two.put(31, descriptors[0]);
+  reference.put(31, descriptors[0]);
+  for (const auto& q : randomDescriptors(&rng, 10)) {
+    EXPECT_EQ(owners(two.nearest(q, 16)), reference.nearest(q, 16));
+  }
+}
+
 TEST(PrefilterIndex, LoadedModelsAreFoundAndReplacedLikePutOnes) {
   std::mt19937 rng(3);
   const auto a = randomDescriptors(&rng, 10), b = randomDescriptors(&rng, 10);
