@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <set>
 #include <thread>
 
@@ -22,6 +23,21 @@ double msSince(Clock::time_point t) {
 }
 
 SegmentKey keyOf(const model::Observation& o) { return {o.session, o.label}; }
+
+// fn(i) for every i in [begin, end), on up to `threads` threads, the caller one of them; each i
+// is taken by the next free thread.
+void parallelFor(size_t begin, size_t end, size_t threads, const std::function<void(size_t)>& fn) {
+  std::atomic<size_t> next{begin};
+  auto work = [&] {
+    for (size_t i = next++; i < end; i = next++) fn(i);
+  };
+  std::vector<std::thread> pool;
+  for (size_t t = 1; t < std::min(threads, end > begin ? end - begin : 0); ++t) {
+    pool.emplace_back(work);
+  }
+  work();
+  for (auto& thread : pool) thread.join();
+}
 
 }  // namespace
 
@@ -222,18 +238,10 @@ StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::Object
   // order: the same candidates on any number of threads.
   const size_t n = model.descriptors.size();
   std::vector<std::vector<PrefilterIndex::Neighbour>> found(n);
-  std::atomic<size_t> next{0};
-  auto search = [&] {
-    for (size_t i = next++; i < n; i = next++) {
-      const model::Fpfh& d = model.descriptors[i];
-      found[i] = exhaustive ? prefilter_.nearestExhaustive(d, k) : prefilter_.nearest(d, k);
-    }
-  };
-  const size_t threads = std::min(n, size_t(std::max(1, params_.database.threads)));
-  std::vector<std::thread> pool;
-  for (size_t t = 1; t < threads; ++t) pool.emplace_back(search);
-  search();
-  for (auto& thread : pool) thread.join();
+  parallelFor(0, n, size_t(std::max(1, params_.database.threads)), [&](size_t i) {
+    const model::Fpfh& d = model.descriptors[i];
+    found[i] = exhaustive ? prefilter_.nearestExhaustive(d, k) : prefilter_.nearest(d, k);
+  });
   std::map<int64_t, int> votes;
   std::set<int64_t> voted;
   for (const auto& neighbours : found) {
@@ -586,19 +594,9 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
       }
       break;
     }
-    std::atomic<size_t> next{begin};
-    auto work = [&] {
-      for (size_t c = next++; c < end; c = next++) {
-        report.results[c] = evaluate(incoming, *loaded[c], thresholds, live, &per_candidate[c]);
-      }
-    };
-    if (end - begin <= 1) {
-      work();
-    } else {
-      std::vector<std::thread> pool;
-      for (size_t w = 0; w < end - begin; ++w) pool.emplace_back(work);
-      for (auto& thread : pool) thread.join();
-    }
+    parallelFor(begin, end, wave, [&](size_t c) {
+      report.results[c] = evaluate(incoming, *loaded[c], thresholds, live, &per_candidate[c]);
+    });
     for (size_t c = begin; c < end; ++c) accepted += report.results[c].accepted ? 1 : 0;
   }
   if (stop > 0) {
