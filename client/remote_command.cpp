@@ -76,9 +76,10 @@ int stats(v1::ObjectDatabase::Stub& stub, const Options& o) {
               (unsigned long long)s.scene_checks(),
               (unsigned long long)s.candidates_rejected_by_scene(),
               (unsigned long long)s.poses_without_scene());
-  std::printf("inserts: %llu, %.2f s in the database stage, %.2f s waiting for the writer lock\n",
+  std::printf("inserts: %llu, %.2f s in the database stage, %.2f s waiting for the writer lock, "
+              "%.2f s under it\n",
               (unsigned long long)s.insert_timings().inserts(), s.insert_timings().total_s(),
-              s.insert_timings().writer_wait_s());
+              s.insert_timings().writer_wait_s(), s.insert_timings().writer_hold_s());
   std::printf("leases: %llu sessions of stopped servers taken over, %llu leases lost\n",
               (unsigned long long)s.sessions_taken_over(), (unsigned long long)s.leases_lost());
   return 0;

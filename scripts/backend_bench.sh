@@ -36,7 +36,8 @@ psql "$base_uri" -XAtq -c "ALTER SYSTEM SET fsync = on" -c "ALTER SYSTEM SET ful
   -c "ALTER SYSTEM SET synchronous_commit = on" -c "SELECT pg_reload_conf()" >/dev/null
 pg_uri=${base_uri/\/postgres\?/\/objdb_bench?}
 
-# Runs the dataset through a server on $1; prints "stream_s db_s inserts writer_wait_s".
+# Runs the dataset through a server on $1; prints "stream_s db_s inserts writer_wait_s
+# writer_hold_s" (the last: the time under the writer lock, the part serial across servers).
 run() {
   local db=$1 log="$work/server.log" address=""
   "$SERVER" --listen 127.0.0.1:0 --db "$db" >"$log" 2>&1 &
@@ -60,17 +61,19 @@ run() {
   python3 - "$start" "$end" "$work/stats.txt" <<'PY'
 import re, sys
 start, end = float(sys.argv[1]), float(sys.argv[2])
-m = re.search(r"inserts: (\d+), ([0-9.]+) s in the database stage, ([0-9.]+) s waiting",
-              open(sys.argv[3]).read())
-inserts, db, wait = (int(m[1]), float(m[2]), float(m[3])) if m else (0, float("nan"), float("nan"))
-print(f"{end - start:.1f} {db:.1f} {inserts} {wait:.2f}")
+m = re.search(r"inserts: (\d+), ([0-9.]+) s in the database stage, ([0-9.]+) s waiting for the "
+              r"writer lock, ([0-9.]+) s under it", open(sys.argv[3]).read())
+nan = float("nan")
+inserts, db, wait, hold = (int(m[1]), float(m[2]), float(m[3]), float(m[4])) if m else (0, nan, nan, nan)
+print(f"{end - start:.1f} {db:.1f} {inserts} {wait:.2f} {hold:.1f}")
 PY
 }
 
 echo "$(basename "$DATASET") through one objdb-server, $(nproc) cores (noisy: compare within a run)"
 # Each repeat on a new database of each backend; the order alternates (SQLite first, then
 # PostgreSQL first), so that neither always runs on a cold machine.
-printf '%-12s %7s %12s %14s %9s %16s\n' backend repeat "stream s" "database s" inserts "writer wait s"
+printf '%-12s %7s %12s %14s %9s %16s %14s\n' backend repeat "stream s" "database s" inserts \
+  "writer wait s" "under lock s"
 declare -a s_streams=() p_streams=() s_dbs=() p_dbs=()
 for ((r = 1; r <= REPEATS; r++)); do
   order=(sqlite postgres)
@@ -85,8 +88,9 @@ for ((r = 1; r <= REPEATS; r++)); do
       result=$(run "$pg_uri")
       label=PostgreSQL
     fi
-    read -r stream db inserts wait <<<"$result"
-    printf '%-12s %7d %12s %14s %9s %16s\n' "$label" "$r" "$stream" "$db" "$inserts" "$wait"
+    read -r stream db inserts wait hold <<<"$result"
+    printf '%-12s %7d %12s %14s %9s %16s %14s\n' "$label" "$r" "$stream" "$db" "$inserts" "$wait" \
+      "$hold"
     if [[ $backend == sqlite ]]; then s_streams+=("$stream"); s_dbs+=("$db"); else p_streams+=("$stream"); p_dbs+=("$db"); fi
   done
 done

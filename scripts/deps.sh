@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian packages objdb needs, skipping the ones already present.
 # Extra packages may be given as arguments (scripts/peer_bench.sh: libopen3d-dev). postgresql is
-# the server the PostgreSQL tests start their own throwaway cluster with (scripts/pg_test_cluster.sh).
+# the server the PostgreSQL tests start their own throwaway cluster with (scripts/pg_test_cluster.sh);
+# the python3 packages are the Python client's (client/python) and its tests'.
 # Safe to run repeatedly; a second run with everything installed takes well under a second.
 set -euo pipefail
 
@@ -14,6 +15,7 @@ PACKAGES=(
   libspdlog-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   openssl
+  python3 python3-grpcio python3-protobuf python3-numpy python3-pytest
 )
 PACKAGES+=("$@")
 

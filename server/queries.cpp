@@ -422,6 +422,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
       out.set_store_s(t.store_ms / 1000);
       out.set_total_s(t.total_ms / 1000);
       out.set_writer_wait_s(t.writer_wait_ms / 1000);
+      out.set_writer_hold_s(t.writer_hold_ms / 1000);
     }
     response->set_sessions_taken_over(sessions_taken_over_.load());
     response->set_leases_lost(leases_lost_.load());

@@ -491,17 +491,50 @@ Status ObjectDatabase::absorbCoAccepted(
   return absl::OkStatus();
 }
 
+ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& session,
+                                                       const gsm::RawSegment& segment,
+                                                       const LiveScenes& live) {
+  Prepared prepared;
+  InsertReport& report = prepared.report;
+  prepared.incoming = model::buildModel(segment.grid.clone(), segment.label_voxels,
+                                        buildParams(segment.observation_depth_m));
+  if (!prepared.incoming.ok()) return prepared;
+  model::ObjectModel& incoming = *prepared.incoming;
+  incoming.observations = {{session, segment.label, segment.T_world_segment, Transform::Identity()}};
+  report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
+  report.timings.keypoints_ms = incoming.timings.keypoints_ms;
+  report.timings.descriptors_ms = incoming.timings.descriptors_ms;
+  if (!incoming.structure) {
+    // A piece of a bigger face (a partition's top, a strip of wall) is structure too: its plane,
+    // grown through the session's scene, is bigger than an object can be.
+    const auto t = Clock::now();
+    auto grown = growInScene(session, incoming, live);
+    if (!grown.ok()) {
+      prepared.incoming = grown.status();
+      return prepared;
+    }
+    report.grown_plane_span_m = *grown;
+    incoming.structure = report.grown_plane_span_m >= params_.model.structure_min_extent_m;
+    report.timings.cloud_ms += msSince(t);  // part of P: the planarity and structure tests
+  }
+  report.planar = incoming.planar;
+  report.structure = incoming.structure;
+  report.matchable = incoming.matchable(params_.model);
+  logger("database")->debug(
+      "segment {}/{}: {} points seen from {:.2f} m (depth noise {:.2f} x sigma), {:.0f} % on one "
+      "plane (within {:.1f} cm), grown through the scene to {:.2f} m: {}",
+      session, segment.label, incoming.cloud.points.size(), segment.observation_depth_m,
+      segment.noise_scale, 100.0 * incoming.plane_inlier_ratio, 100.0 * incoming.plane_distance_m,
+      report.grown_plane_span_m,
+      incoming.structure ? "structure" : incoming.planar ? "planar" : "object");
+  return prepared;
+}
+
 StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
                                                      const gsm::RawSegment& segment,
-                                                     const LiveScenes& live) {
-  const auto start = Clock::now();
-  if (session.empty()) return absl::InvalidArgumentError("insert: the session name is empty");
-  OBJDB_RETURN_IF_ERROR(validateTransform(segment.T_world_segment, "raw segment pose"));
-  if (segment.label_voxels.empty()) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("insert: raw segment %s/%d has no voxels", session, segment.label));
-  }
-  InsertReport report;
+                                                     const LiveScenes& live, Prepared prepared) {
+  const auto locked = Clock::now();
+  InsertReport report = std::move(prepared.report);
   const SegmentKey key{session, segment.label};
   if (const auto it = segment_model_.find(key); it != segment_model_.end()) {
     const auto t = Clock::now();
@@ -519,32 +552,8 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
   record.parts = segment.parts;
   record.voxel_parts = segment.voxel_parts;
   OBJDB_RETURN_IF_ERROR(store_->putRawSegment(record));
-
-  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel incoming,
-                         model::buildModel(record.grid->clone(), record.voxels,
-                                           buildParams(segment.observation_depth_m)));
-  incoming.observations = {{session, segment.label, segment.T_world_segment, Transform::Identity()}};
-  report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
-  report.timings.keypoints_ms = incoming.timings.keypoints_ms;
-  report.timings.descriptors_ms = incoming.timings.descriptors_ms;
-  if (!incoming.structure) {
-    // A piece of a bigger face (a partition's top, a strip of wall) is structure too: its plane,
-    // grown through the session's scene, is bigger than an object can be.
-    const auto t = Clock::now();
-    OBJDB_ASSIGN_OR_RETURN(report.grown_plane_span_m, growInScene(session, incoming, live));
-    incoming.structure = report.grown_plane_span_m >= params_.model.structure_min_extent_m;
-    report.timings.cloud_ms += msSince(t);  // part of P: the planarity and structure tests
-  }
-  report.planar = incoming.planar;
-  report.structure = incoming.structure;
-  report.matchable = incoming.matchable(params_.model);
-  logger("database")->debug(
-      "segment {}/{}: {} points seen from {:.2f} m (depth noise {:.2f} x sigma), {:.0f} % on one "
-      "plane (within {:.1f} cm), grown through the scene to {:.2f} m: {}",
-      session, segment.label, incoming.cloud.points.size(), segment.observation_depth_m,
-      segment.noise_scale, 100.0 * incoming.plane_inlier_ratio, 100.0 * incoming.plane_distance_m,
-      report.grown_plane_span_m,
-      incoming.structure ? "structure" : incoming.planar ? "planar" : "object");
+  OBJDB_RETURN_IF_ERROR(prepared.incoming.status());
+  model::ObjectModel incoming = std::move(*prepared.incoming);
 
   std::vector<int64_t> candidates;
   std::vector<std::shared_ptr<const model::ObjectModel>> loaded;
@@ -687,7 +696,7 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
     }
   }
   report.timings.store_ms = msSince(t_store);
-  report.timings.total_ms = msSince(start);
+  report.timings.writer_hold_ms = msSince(locked);
   return report;
 }
 

@@ -69,8 +69,9 @@ struct InsertTimings {
   // included).
   double replace_ms = 0, prefilter_ms = 0, load_ms = 0, store_ms = 0;
   // Several writers on one store: waiting for the writer lock and catching up on the others'
-  // changes (0 with one writer); not in total_ms, which is the time under the lock.
-  double writer_wait_ms = 0;
+  // changes (0 with one writer), not in total_ms; and the time under the lock (the serial part
+  // across writers, in total_ms: everything but the segment's own model, built before the lock).
+  double writer_wait_ms = 0, writer_hold_ms = 0;
 
   InsertTimings& operator+=(const InsertTimings& o) {
     cloud_ms += o.cloud_ms;
@@ -85,6 +86,7 @@ struct InsertTimings {
     load_ms += o.load_ms;
     store_ms += o.store_ms;
     writer_wait_ms += o.writer_wait_ms;
+    writer_hold_ms += o.writer_hold_ms;
     return *this;
   }
 };
@@ -215,8 +217,19 @@ class ObjectDatabase {
   StatusOr<std::unique_ptr<WriterLock>> beginWrite();
   void endWrite(const WriterLock* lock);
   void applyChanges(const ModelChanges& changes);
+  // The part of an insert that depends on no stored model: the segment's model with its
+  // planarity and structure tests (report: planar, structure, matchable, grown span, the P/K/D
+  // timings). It runs before the writer lock, so that writers build their models in parallel.
+  struct Prepared {
+    StatusOr<model::ObjectModel> incoming = absl::UnknownError("not built");
+    InsertReport report;
+  };
+  Prepared prepareInsert(const std::string& session, const gsm::RawSegment& segment,
+                         const LiveScenes& live);
+  // The rest under the lock. A segment whose model could not be built still replaces its earlier
+  // contribution and is stored as raw segment before the build's error is returned.
   StatusOr<InsertReport> insertLocked(const std::string& session, const gsm::RawSegment& segment,
-                                      const LiveScenes& live);
+                                      const LiveScenes& live, Prepared prepared);
   StatusOr<int64_t> withdrawLocked(const std::string& session, gsm::Label label);
   int64_t applied_seq_ = 0;
   bool measure_prefilter_ = false;

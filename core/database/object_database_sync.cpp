@@ -7,7 +7,9 @@
 #include <chrono>
 #include <iterator>
 
+#include "absl/strings/str_format.h"
 #include "core/common/logging.h"
+#include "core/common/transform.h"
 #include "core/database/object_database.h"
 
 namespace objdb::database {
@@ -23,11 +25,25 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
                                                      const gsm::RawSegment& segment,
                                                      const LiveScenes& live) {
   const auto start = std::chrono::steady_clock::now();
+  if (session.empty()) return absl::InvalidArgumentError("insert: the session name is empty");
+  OBJDB_RETURN_IF_ERROR(validateTransform(segment.T_world_segment, "raw segment pose"));
+  if (segment.label_voxels.empty()) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("insert: raw segment %s/%d has no voxels", session, segment.label));
+  }
+  // The segment's own model needs no stored one: built before the lock, in parallel with the
+  // other writers' inserts.
+  Prepared prepared = prepareInsert(session, segment, live);
+  const double prepare_ms = msSince(start);
+  const auto wait_start = std::chrono::steady_clock::now();
   OBJDB_ASSIGN_OR_RETURN(const std::unique_ptr<WriterLock> writer, beginWrite());
-  const double wait_ms = msSince(start);
-  auto report = insertLocked(session, segment, live);
+  const double wait_ms = msSince(wait_start);
+  auto report = insertLocked(session, segment, live, std::move(prepared));
   endWrite(writer.get());
-  if (report.ok()) report->timings.writer_wait_ms = writer == nullptr ? 0.0 : wait_ms;
+  if (report.ok()) {
+    report->timings.writer_wait_ms = writer == nullptr ? 0.0 : wait_ms;
+    report->timings.total_ms = prepare_ms + report->timings.writer_hold_ms;
+  }
   return report;
 }
 
