@@ -1,0 +1,199 @@
+"""What the server answers, as dataclasses with numpy arrays. Each keeps its protobuf message in
+`proto` for the fields not copied out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional, Tuple, Union
+
+import numpy as np
+from google.protobuf import json_format
+
+from objdb.geometry import Intrinsics, Mesh, PointCloud, pose_to_matrix
+from objdb.v1 import objdb_pb2 as pb
+
+
+def to_dict(message) -> dict:
+    """A protobuf message as a dict (proto field names, every field present)."""
+    return json_format.MessageToDict(message, preserving_proto_field_name=True,
+                                     including_default_value_fields=True)
+
+
+def _enum_name(enum, value: int, prefix: str) -> str:
+    name = enum.Name(value) if value in enum.values() else f"{prefix}{value}"
+    return name[len(prefix):].lower() if name.startswith(prefix) else name.lower()
+
+
+def _box(box: pb.BoundingBox) -> Tuple[np.ndarray, np.ndarray]:
+    return (np.array([box.min.x, box.min.y, box.min.z]),
+            np.array([box.max.x, box.max.y, box.max.z]))
+
+
+@dataclass
+class FrameAck:
+    """A frame was integrated (accepted) or refused (reason names the field and value)."""
+
+    index: int
+    accepted: bool
+    reason: str
+    counters: dict  # this frame's FrameCounters, then the session's totals under "session"
+    proto: pb.FrameAck = field(repr=False)
+
+
+@dataclass
+class SegmentExtracted:
+    """A segment of the session's map went to the database."""
+
+    segment_id: int
+    gsm_label: int
+    reason: str  # "idle" or "session_end"
+    num_voxels: int
+    T_world_segment: np.ndarray
+    bounds_world: Tuple[np.ndarray, np.ndarray]
+    parts: List[int]
+    proto: pb.SegmentExtracted = field(repr=False)
+
+
+@dataclass
+class MergeEvidence:
+    """Why a merge was accepted: e_ICP, e_TSDF and o_TSDF (metres, voxels), the scene checks."""
+
+    icp_rmse_m: float
+    tsdf_rmse_m: float
+    overlap_voxels: int
+    scene_checks: int
+    source: str
+    proto: pb.MergeEvidence = field(repr=False)
+
+    @staticmethod
+    def from_proto(e: pb.MergeEvidence) -> "MergeEvidence":
+        return MergeEvidence(e.icp_rmse_m, e.tsdf_rmse_m, e.overlap_voxels, e.scene_checks,
+                             e.source, e)
+
+
+@dataclass
+class ObjectEvent:
+    """kind "created": segment_id became object object_id. kind "merged": the segment
+    (object_id 0) or the existing object object_id merged into into_object_id."""
+
+    kind: str
+    object_id: int
+    into_object_id: int
+    segment_id: int
+    evidence: Optional[MergeEvidence]
+    proto: pb.ObjectEvent = field(repr=False)
+
+
+@dataclass
+class SessionSummary:
+    session: str
+    state: str  # "open", "ended" or "interrupted"
+    counters: dict
+    object_ids: List[int]
+    proto: pb.SessionSummary = field(repr=False)
+
+    @staticmethod
+    def from_proto(s: pb.SessionSummary) -> "SessionSummary":
+        return SessionSummary(s.session_name, _enum_name(pb.SessionState, s.state, "SESSION_STATE_"),
+                              to_dict(s.counters), list(s.object_ids), s)
+
+
+@dataclass
+class SessionEnded:
+    """The last event of Client.stream(end=True): EndSession's summary."""
+
+    summary: SessionSummary
+
+
+Event = Union[FrameAck, SegmentExtracted, ObjectEvent, SessionSummary, SessionEnded]
+
+
+def event(response: pb.IngestResponse) -> Event:
+    kind = response.WhichOneof("event")
+    if kind == "ack":
+        a = response.ack
+        counters = to_dict(a.frame) | {"session": to_dict(a.session)}
+        return FrameAck(a.index, a.accepted, a.reason, counters, a)
+    if kind == "segment":
+        s = response.segment
+        return SegmentExtracted(s.segment_id, s.gsm_label,
+                                _enum_name(pb.SegmentExtracted.Reason, s.reason, ""),
+                                s.num_voxels, pose_to_matrix(s.T_world_segment),
+                                _box(s.bounds_world), list(s.parts), s)
+    if kind == "object":
+        o = response.object
+        merged = o.kind == pb.ObjectEvent.MERGED
+        return ObjectEvent(_enum_name(pb.ObjectEvent.Kind, o.kind, ""), o.object_id,
+                           o.into_object_id, o.segment_id,
+                           MergeEvidence.from_proto(o.evidence) if merged else None, o)
+    if kind == "summary":
+        return SessionSummary.from_proto(response.summary)
+    raise ValueError(f"the server sent an event this client does not know ({kind})")
+
+
+@dataclass
+class SessionInfo:
+    name: str
+    state: str
+    started_unix_s: float
+    ended_unix_s: float
+    client_info: str
+    intrinsics: Intrinsics
+    counters: dict
+    proto: pb.SessionInfo = field(repr=False)
+
+    @staticmethod
+    def from_proto(s: pb.SessionInfo) -> "SessionInfo":
+        return SessionInfo(s.session_name, _enum_name(pb.SessionState, s.state, "SESSION_STATE_"),
+                           s.started_unix_s, s.ended_unix_s, s.client_info,
+                           Intrinsics.from_proto(s.intrinsics), to_dict(s.counters), s)
+
+
+@dataclass
+class ObjectSummary:
+    id: int
+    state: str  # "active" or "merged"
+    sessions: List[str]
+    num_poses: int
+    num_places: int
+    bounds: Tuple[np.ndarray, np.ndarray]  # in the object's base frame
+    planar: bool
+    structure: bool
+    parts: list  # with whole_only=False: the parts (protobuf ObjectPart) at each pose
+    proto: pb.ObjectSummary = field(repr=False)
+
+    @staticmethod
+    def from_proto(o: pb.ObjectSummary) -> "ObjectSummary":
+        return ObjectSummary(o.id, _enum_name(pb.ObjectState, o.state, "OBJECT_STATE_"),
+                             list(o.session_names), o.num_poses, o.num_places,
+                             _box(o.bounds_object), o.planar, o.structure, list(o.parts), o)
+
+
+@dataclass
+class ObjectDetail:
+    """An object: poses[i] is T_world_object in session pose_sessions[i]; cloud and mesh (when
+    asked) are in the object's base frame."""
+
+    summary: ObjectSummary
+    poses: np.ndarray  # N x 4 x 4
+    pose_sessions: List[str]
+    segment_ids: List[int]
+    cloud: Optional[PointCloud]
+    mesh: Optional[Mesh]
+    merges: List[MergeEvidence]
+    stats: dict
+    proto: pb.ObjectDetail = field(repr=False)
+
+    @property
+    def id(self) -> int:
+        return self.summary.id
+
+    @staticmethod
+    def from_proto(d: pb.ObjectDetail) -> "ObjectDetail":
+        poses = np.array([pose_to_matrix(p.T_world_object) for p in d.poses]).reshape(-1, 4, 4)
+        return ObjectDetail(
+            ObjectSummary.from_proto(d.summary), poses, [p.session_name for p in d.poses],
+            [p.segment_id for p in d.poses],
+            PointCloud.from_proto(d.cloud) if d.HasField("cloud") else None,
+            Mesh.from_proto(d.mesh) if d.HasField("mesh") else None,
+            [MergeEvidence.from_proto(m) for m in d.merges], to_dict(d.stats), d)
