@@ -17,5 +17,6 @@ int runStreamCommand(int argc, char** argv);  // stream_command.cpp
 int runRemoteCommand(int argc, char** argv);  // remote_command.cpp
 int runReportCommand(int argc, char** argv);  // report_command.cpp
 int runEvalCommand(int argc, char** argv);    // eval_command.cpp
+int runWebCommand(int argc, char** argv);     // web_command.cpp
 
 }  // namespace objdb

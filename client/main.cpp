@@ -27,6 +27,7 @@ commands:
   report   merges: a PNG sheet of every multi-segment model over the camera images; truth:
            a database scored against the datasets' ground truth
   eval     run datasets through an in-process server on a new database and score it
+  web      serve a read-only web viewer of a server's database (sessions, objects, scenes)
   help     show this text
 
 Run "objdb <command> --help" for the options of a command.
@@ -65,6 +66,7 @@ int main(int argc, char** argv) {
   if (command == "ingest") return objdb::runIngestCommand(argc - 1, argv + 1);
   if (command == "stream") return objdb::runStreamCommand(argc - 1, argv + 1);
   if (command == "remote") return objdb::runRemoteCommand(argc - 1, argv + 1);
+  if (command == "web") return objdb::runWebCommand(argc - 1, argv + 1);
   if (command == "report") return objdb::runReportCommand(argc - 1, argv + 1);
   if (command == "eval") return objdb::runEvalCommand(argc - 1, argv + 1);
   std::fprintf(stderr, "objdb: unknown command \"%s\"\n\n%s", command.c_str(), kUsage);

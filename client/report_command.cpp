@@ -18,15 +18,14 @@
 #include <string>
 #include <vector>
 
-#include <Eigen/Eigenvalues>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "absl/strings/str_format.h"
 #include "client/cli_util.h"
 #include "client/db_scan.h"
 #include "client/db_score.h"
+#include "client/merge_sheet.h"
 #include "client/commands.h"
 #include "core/io/dataset.h"
 #include "storage/sqlite/sqlite_store.h"
@@ -65,60 +64,6 @@ and the models per true object.
 
 exit status: 0 sheet written; 1 the database, a dataset or the sheet failed; 2 command-line error.
 )";
-
-constexpr int kRowHeight = 240, kTileWidth = 320, kInfoWidth = 380, kCloudWidth = 240;
-constexpr int kMaxTiles = 5;
-cv::Mat tileOf(const Frame& frame) {
-  cv::Mat tile;
-  if (frame.color) {
-    cv::Mat rgb(frame.color->height, frame.color->width, CV_8UC3,
-                const_cast<Rgb8*>(frame.color->data.data()));
-    cv::cvtColor(rgb, tile, cv::COLOR_RGB2BGR);
-  } else {
-    cv::Mat depth(frame.depth.height, frame.depth.width, CV_32F,
-                  const_cast<float*>(frame.depth.data.data()));
-    cv::Mat grey;
-    depth.convertTo(grey, CV_8U, 255.0 / 5.0);
-    cv::cvtColor(grey, tile, cv::COLOR_GRAY2BGR);
-  }
-  cv::resize(tile, tile, cv::Size(kTileWidth, kRowHeight));
-  tile *= 0.35;  // dimmed: the placement's points stand out
-  return tile;
-}
-
-void text(cv::Mat* image, const std::string& line, int x, int y, double scale = 0.45,
-          const cv::Scalar& colour = cv::Scalar(235, 235, 235)) {
-  cv::putText(*image, line, cv::Point(x, y), cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1,
-              cv::LINE_AA);
-}
-
-// The cloud seen along its smallest principal axis, shaded by depth along it.
-void drawCloud(const std::vector<Eigen::Vector3f>& points, cv::Mat* panel) {
-  if (points.size() < 3) return;
-  Eigen::Vector3f mean = Eigen::Vector3f::Zero();
-  for (const auto& p : points) mean += p;
-  mean /= float(points.size());
-  Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
-  for (const auto& p : points) cov += (p - mean) * (p - mean).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> solver(cov);
-  const Eigen::Vector3f a = solver.eigenvectors().col(2), b = solver.eigenvectors().col(1),
-                        c = solver.eigenvectors().col(0);
-  float extent = 1e-3f, depth_lo = 1e9f, depth_hi = -1e9f;
-  for (const auto& p : points) {
-    extent = std::max({extent, std::abs((p - mean).dot(a)), std::abs((p - mean).dot(b))});
-    depth_lo = std::min(depth_lo, (p - mean).dot(c));
-    depth_hi = std::max(depth_hi, (p - mean).dot(c));
-  }
-  const float scale = 0.45f * float(std::min(panel->cols, panel->rows)) / extent;
-  for (const auto& p : points) {
-    const Eigen::Vector3f q = p - mean;
-    const float shade = (q.dot(c) - depth_lo) / std::max(1e-3f, depth_hi - depth_lo);
-    cv::circle(*panel,
-               cv::Point(panel->cols / 2 + int(q.dot(a) * scale),
-                         panel->rows / 2 - int(q.dot(b) * scale)),
-               1, cv::Scalar(120 + 120 * shade, 200, 255 - 120 * shade), -1);
-  }
-}
 
 struct Options {
   std::string db_path, out;
@@ -180,71 +125,20 @@ int merges(int argc, char** argv) {
     return cli::reportError(kCommand, scanned);
   }
 
-  const int width = kInfoWidth + kCloudWidth + kMaxTiles * kTileWidth;
-  cv::Mat sheet(40 + kRowHeight * int(std::max<size_t>(rows.size(), 1)), width, CV_8UC3,
-                cv::Scalar(30, 30, 30));
-  text(&sheet,
+  const int width = cli::kSheetWidth;
+  cv::Mat sheet(40 + cli::kSheetRowHeight * int(std::max<size_t>(rows.size(), 1)), width,
+                CV_8UC3, cv::Scalar(30, 30, 30));
+  cli::sheetText(&sheet,
        absl::StrFormat("%s: %d models built from %d or more segments (placements over the frame "
                        "that sees them best)",
                        db_path, rows.size(), o.min_segments),
        10, 26, 0.6);
-  if (rows.empty()) text(&sheet, "no merges", 10, 70, 0.6);
-  const cv::Scalar colours[] = {{80, 255, 80}, {255, 120, 255}, {80, 200, 255}, {255, 200, 80},
-                                {120, 120, 255}};
+  if (rows.empty()) cli::sheetText(&sheet, "no merges", 10, 70, 0.6);
   for (size_t r = 0; r < rows.size(); ++r) {
-    const cli::Row& row = rows[r];
-    const int y0 = 40 + kRowHeight * int(r);
-    cv::Mat info = sheet(cv::Rect(0, y0, kInfoWidth, kRowHeight));
-    cv::rectangle(info, cv::Rect(0, 0, kInfoWidth, kRowHeight), cv::Scalar(70, 70, 70), 1);
-    const auto& s = row.summary;
-    const Eigen::Vector3d e = s.bbox_max - s.bbox_min;
-    const size_t places = cli::places(row);
-    text(&info, absl::StrFormat("object %d: %d segments at %d place%s, %s", s.id,
-                                s.observations.size(), places, places == 1 ? "" : "s",
-                                s.structure ? "STRUCTURE" : s.planar ? "planar" : "object"),
-         8, 20, 0.55);
-    text(&info, absl::StrFormat("extent %.2f x %.2f x %.2f m, %d points", e.x(), e.y(), e.z(),
-                                s.num_points),
-         8, 42);
-    int y = 64;
-    for (const auto& m : row.merges) {
-      if (y > kRowHeight - 10) break;
-      text(&info, m.source, 8, y, 0.4);
-      text(&info, absl::StrFormat("   e_ICP %.1f mm, e_TSDF %.1f mm, o_TSDF %d, %d scene",
-                                  1000 * m.icp_rmse_m, 1000 * m.tsdf_rmse_m, m.tsdf_overlap,
-                                  m.scene_checks),
-           8, y + 16, 0.4);
-      y += 36;
-    }
-    cv::Mat cloud_panel = sheet(cv::Rect(kInfoWidth, y0, kCloudWidth, kRowHeight));
-    drawCloud(row.points, &cloud_panel);
-    for (size_t t = 0; t < row.placements.size() && t < size_t(kMaxTiles); ++t) {
-      const cli::Placement& p = row.placements[t];
-      cv::Mat slot = sheet(cv::Rect(kInfoWidth + kCloudWidth + int(t) * kTileWidth, y0,
-                                    kTileWidth, kRowHeight));
-      const auto it = opened.find(p.session);
-      if (it == opened.end() || p.best_hits == 0) {
-        text(&slot, p.session, 8, 20);
-        text(&slot, it == opened.end() ? "(no dataset given)" : "(seen in no frame)", 8, 42);
-        continue;
-      }
-      auto frame = it->second->loadFrame(p.best_frame);
-      if (!frame.ok()) return cli::reportError(kCommand, frame.status());
-      cv::Mat tile = tileOf(*frame);
-      cli::depthAgreeingPoints(row.points, frame->T_world_camera.inverse() * p.T_world_object,
-                               *frame, it->second->intrinsics(), &tile, colours[t % 5]);
-      text(&tile, absl::StrFormat("%s frame %d, %d points", p.session, p.best_frame, p.best_hits),
-           6, 16, 0.42);
-      // Two placements of one session at one place: one surface under two GSM labels, not two
-      // objects.
-      for (size_t e = 0; e < t; ++e) {
-        if (cli::samePlace(row, row.placements[e], p)) {
-          text(&tile, absl::StrFormat("same place as placement %d", e + 1), 6, 34, 0.42,
-               cv::Scalar(80, 200, 255));
-          break;
-        }
-      }
-      tile.copyTo(slot);
+    cv::Mat row = sheet(cv::Rect(0, 40 + cli::kSheetRowHeight * int(r), width,
+                                 cli::kSheetRowHeight));
+    if (Status drawn = cli::drawSheetRow(rows[r], opened, &row); !drawn.ok()) {
+      return cli::reportError(kCommand, drawn);
     }
   }
   if (!cv::imwrite(out, sheet)) {

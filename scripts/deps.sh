@@ -2,7 +2,9 @@
 # Installs the Debian packages objdb needs, skipping the ones already present.
 # Extra packages may be given as arguments (scripts/peer_bench.sh: libopen3d-dev). postgresql is
 # the server the PostgreSQL tests start their own throwaway cluster with (scripts/pg_test_cluster.sh);
-# the python3 packages are the Python client's (client/python) and its tests'.
+# the python3 packages are the Python client's (client/python) and its tests'; libcpp-httplib-dev
+# and libjs-three are `objdb web`'s, chromium, chromium-driver and python3-selenium its
+# browser test's.
 # Safe to run repeatedly; a second run with everything installed takes well under a second.
 set -euo pipefail
 
@@ -14,8 +16,9 @@ PACKAGES=(
   postgresql libpq-dev
   libspdlog-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  openssl
+  openssl libssl-dev libcpp-httplib-dev libjs-three
   python3 python3-grpcio python3-protobuf python3-numpy python3-pytest
+  chromium chromium-driver python3-selenium
 )
 PACKAGES+=("$@")
 

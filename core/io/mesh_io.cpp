@@ -802,9 +802,9 @@ void appendLittleEndian(std::string* out, T value) {
   out->append(bytes, sizeof(T));
 }
 
-Status writePly(const fs::path& path, const std::vector<Eigen::Vector3f>& points,
-                const std::vector<Eigen::Vector3f>& normals, const std::vector<Rgb8>& colors,
-                const std::vector<Eigen::Vector3i>* triangles, bool ascii) {
+std::string plyBytes(const std::vector<Eigen::Vector3f>& points,
+                     const std::vector<Eigen::Vector3f>& normals, const std::vector<Rgb8>& colors,
+                     const std::vector<Eigen::Vector3i>* triangles, bool ascii) {
   const bool has_normals = !normals.empty();
   const bool has_colors = !colors.empty();
   std::string out = "ply\n";
@@ -853,13 +853,13 @@ Status writePly(const fs::path& path, const std::vector<Eigen::Vector3f>& points
       }
     }
   }
-  return internal::writeFileAtomic(path, out);
+  return out;
 }
 
-Status checkAttributes(const fs::path& path, const std::vector<Eigen::Vector3f>& points,
+// `what`: "cannot write <file>" or the like, the start of every error.
+Status checkAttributes(const std::string& what, const std::vector<Eigen::Vector3f>& points,
                        const std::vector<Eigen::Vector3f>& normals,
                        const std::vector<Rgb8>& colors) {
-  const std::string what = absl::StrCat("cannot write ", path.string());
   if (!(normals.empty() || normals.size() == points.size())) {
     return absl::InvalidArgumentError(
         absl::StrFormat("%s: %d normals for %d points", what, normals.size(), points.size()));
@@ -911,23 +911,37 @@ StatusOr<TriangleMesh> readMesh(const fs::path& path) {
   return mesh;
 }
 
-Status writePlyMesh(const fs::path& path, const TriangleMesh& mesh, bool ascii) {
-  OBJDB_RETURN_IF_ERROR(annotate(mesh.validate(), absl::StrCat("cannot write ", path.string())));
-  OBJDB_RETURN_IF_ERROR(checkAttributes(path, mesh.vertices, mesh.normals, mesh.colors));
+StatusOr<std::string> plyMeshBytes(const TriangleMesh& mesh, bool ascii,
+                                   const std::string& what) {
+  OBJDB_RETURN_IF_ERROR(annotate(mesh.validate(), what));
+  OBJDB_RETURN_IF_ERROR(checkAttributes(what, mesh.vertices, mesh.normals, mesh.colors));
   try {
-    return writePly(path, mesh.vertices, mesh.normals, mesh.colors, &mesh.triangles, ascii);
+    return plyBytes(mesh.vertices, mesh.normals, mesh.colors, &mesh.triangles, ascii);
   } catch (const std::bad_alloc&) {
-    return absl::ResourceExhaustedError(absl::StrCat("out of memory writing ", path.string()));
+    return absl::ResourceExhaustedError(absl::StrCat(what, ": out of memory"));
   }
 }
 
-Status writePlyCloud(const fs::path& path, const PointCloud& cloud, bool ascii) {
-  OBJDB_RETURN_IF_ERROR(checkAttributes(path, cloud.points, cloud.normals, cloud.colors));
+StatusOr<std::string> plyCloudBytes(const PointCloud& cloud, bool ascii,
+                                    const std::string& what) {
+  OBJDB_RETURN_IF_ERROR(checkAttributes(what, cloud.points, cloud.normals, cloud.colors));
   try {
-    return writePly(path, cloud.points, cloud.normals, cloud.colors, nullptr, ascii);
+    return plyBytes(cloud.points, cloud.normals, cloud.colors, nullptr, ascii);
   } catch (const std::bad_alloc&) {
-    return absl::ResourceExhaustedError(absl::StrCat("out of memory writing ", path.string()));
+    return absl::ResourceExhaustedError(absl::StrCat(what, ": out of memory"));
   }
+}
+
+Status writePlyMesh(const fs::path& path, const TriangleMesh& mesh, bool ascii) {
+  OBJDB_ASSIGN_OR_RETURN(const std::string bytes,
+                         plyMeshBytes(mesh, ascii, absl::StrCat("cannot write ", path.string())));
+  return internal::writeFileAtomic(path, bytes);
+}
+
+Status writePlyCloud(const fs::path& path, const PointCloud& cloud, bool ascii) {
+  OBJDB_ASSIGN_OR_RETURN(const std::string bytes,
+                         plyCloudBytes(cloud, ascii, absl::StrCat("cannot write ", path.string())));
+  return internal::writeFileAtomic(path, bytes);
 }
 
 }  // namespace objdb::io

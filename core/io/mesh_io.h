@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 
 #include "core/common/mesh.h"
 
@@ -18,5 +19,10 @@ Status writePlyMesh(const std::filesystem::path& path, const TriangleMesh& mesh,
                     bool ascii = false);
 Status writePlyCloud(const std::filesystem::path& path, const PointCloud& cloud,
                      bool ascii = false);
+// The same files' bytes (e.g. to serve over HTTP); errors start with `what`.
+StatusOr<std::string> plyMeshBytes(const TriangleMesh& mesh, bool ascii = false,
+                                   const std::string& what = "cannot encode the mesh as PLY");
+StatusOr<std::string> plyCloudBytes(const PointCloud& cloud, bool ascii = false,
+                                    const std::string& what = "cannot encode the cloud as PLY");
 
 }  // namespace objdb::io

@@ -1,4 +1,5 @@
-"""Fixtures: real objdb-server processes on loopback and datasets written by `objdb sim`.
+"""Fixtures of the Python tests (python/: the Python client, web/: objdb web in a browser): real
+objdb-server processes on loopback and datasets written by `objdb sim`.
 
 OBJDB_BIN names the folder of the built binaries (CTest sets it; default build/bin).
 """
@@ -12,33 +13,28 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(os.environ.get("OBJDB_BIN", ROOT / "build" / "bin"))
 
 
-class Server:
-    """An objdb-server on 127.0.0.1 with a port of its own, on a fresh SQLite database."""
+class Process:
+    """A binary started with its output in `log_path`, running once `pattern` shows in it."""
 
-    def __init__(self, folder: Path, *args):
-        folder.mkdir(parents=True, exist_ok=True)
-        self.log_path = folder / "server.log"
-        self.log = open(self.log_path, "w")
-        self.process = subprocess.Popen(
-            [str(BIN / "objdb-server"), "--listen", "127.0.0.1:0", "--db",
-             str(folder / "objects.sqlite"), *args],
-            stdout=self.log, stderr=subprocess.STDOUT)
-        self.address = None
-        deadline = time.monotonic() + 60
+    def __init__(self, args, log_path: Path, pattern: str, seconds: float = 60):
+        self.log_path = log_path
+        self.log = open(log_path, "w")
+        self.process = subprocess.Popen([str(a) for a in args], stdout=self.log,
+                                        stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + seconds
         while time.monotonic() < deadline:
-            match = re.search(r"listening on (127\.0\.0\.1:\d+)", self.log_path.read_text())
-            if match:
-                self.address = match.group(1)
+            self.match = re.search(pattern, log_path.read_text())
+            if self.match:
                 return
             if self.process.poll() is not None:
                 break
             time.sleep(0.05)
         self.stop()
-        raise RuntimeError(f"objdb-server did not start:\n{self.log_path.read_text()}")
+        raise RuntimeError(f"{args[0]} did not start:\n{log_path.read_text()}")
 
     def stop(self):
         if self.process.poll() is None:
@@ -49,6 +45,17 @@ class Server:
                 self.process.kill()
                 self.process.wait()
         self.log.close()
+
+
+class Server(Process):
+    """An objdb-server on 127.0.0.1 with a port of its own, on a fresh SQLite database."""
+
+    def __init__(self, folder: Path, *args):
+        folder.mkdir(parents=True, exist_ok=True)
+        super().__init__([BIN / "objdb-server", "--listen", "127.0.0.1:0", "--db",
+                          folder / "objects.sqlite", *args],
+                         folder / "server.log", r"listening on (127\.0\.0\.1:\d+)")
+        self.address = self.match.group(1)
 
 
 @pytest.fixture(scope="session")
