@@ -256,6 +256,10 @@ int main(int argc, char** argv) {
         ++skipped;
         continue;
       }
+      if (report->unusable) {  // no surface at the mesh weight: stored, held by no model
+        ++skipped;
+        continue;
+      }
       against_exhaustive.add(*report);
       if (report->matchable && !relevant.empty()) {
         size_t kept = 0;

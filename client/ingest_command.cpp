@@ -141,14 +141,10 @@ int runIngestCommand(int argc, char** argv) {
       };
       for (const auto& segment : segments) {
         auto report = (*db)->insertSegment(name, segment, live);
-        if (!report.ok()) {
-          // A segment the database cannot take (e.g. no surface at the mesh weight) is skipped
-          // and counted; storage errors end the run.
-          if (absl::IsFailedPrecondition(report.status()) || absl::IsInvalidArgument(report.status())) {
-            ++skipped;
-            continue;
-          }
-          return report.status();
+        if (!report.ok()) return report.status();  // every error ends the run
+        if (report->unusable) {  // no surface at the mesh weight: stored, held by no model
+          ++skipped;
+          continue;
         }
         ++inserted;
         merged += report->merged ? 1 : 0;

@@ -294,16 +294,19 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
   };
   auto report = db_->insertSegment(session.name, segment, live);
   if (!report.ok()) {
-    if (absl::IsFailedPrecondition(report.status()) || absl::IsInvalidArgument(report.status())) {
-      // A segment the database cannot take (no surface at the mesh weight): skipped.
-      logger("server")->debug("session {}: segment {} skipped: {}", session.name, segment.label,
-                              std::string(report.status().message()));
-      return absl::OkStatus();
-    }
     const Status failed = annotate(
         report.status(), absl::StrFormat("inserting segment %d of session %s into the database",
                                          segment.label, session.name));
+    insert_errors_.fetch_add(1);
+    logger("server")->warn("{}", failed.ToString());
     return failInsert(stream, failed);
+  }
+  if (report->unusable) {
+    // Stored as a raw segment (it replaced any earlier version of itself), held by no model.
+    segments_unusable_.fetch_add(1);
+    logger("server")->debug("session {}: segment {} stored without a model: {}", session.name,
+                            segment.label, report->unusable_reason);
+    return absl::OkStatus();
   }
   candidates_skipped_.fetch_add(report->unreadable_candidates);
   for (const auto& r : report->results) {

@@ -17,9 +17,9 @@
 // - EndSession flushes the map (every live label), inserts the rest, stores the scene map and
 //   ends the session, on the database thread.
 // - The queries read the store (storage/store.h).
-// - A session's map lives in memory from its header to EndSession: a server stopped before
-//   EndSession loses the map of that session (its segments inserted so far stay), and the
-//   session is stored as interrupted.
+// - A session's map lives in memory from its header to EndSession. A server that stops ends
+//   every session not ended yet and stores its map; only a crash loses the frames after the
+//   session's last saved map (--save-map-s), and the next start ends it from that map.
 #pragma once
 
 #include <atomic>
@@ -232,6 +232,9 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::atomic<uint64_t> poses_without_scene_{0};
   std::atomic<uint64_t> merges_same_place_{0};
   std::atomic<uint64_t> extractions_deferred_{0};
+  // Segments stored without a model (InsertReport::unusable), and inserts that failed.
+  std::atomic<uint64_t> segments_unusable_{0};
+  std::atomic<uint64_t> insert_errors_{0};
   // Insert time by stage since start (GetStats insert_timings).
   std::mutex timings_mutex_;
   database::InsertTimings insert_timings_;

@@ -426,6 +426,8 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
     }
     response->set_sessions_taken_over(sessions_taken_over_.load());
     response->set_leases_lost(leases_lost_.load());
+    response->set_segments_unusable(segments_unusable_.load());
+    response->set_insert_errors(insert_errors_.load());
     return absl::OkStatus();
   };
   return finishUnary(context, run());

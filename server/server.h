@@ -1,5 +1,5 @@
 // The objdb gRPC server: options, listen-address policy, startup and graceful shutdown. Serves
-// objdb.v1.ObjectDatabase (server/object_database_service.h) over its SQLite file and the
+// objdb.v1.ObjectDatabase (server/object_database_service.h) over its store and the
 // standard grpc.health.v1 health service (SERVING for "" and "objdb.v1.ObjectDatabase" while up).
 #pragma once
 
@@ -40,8 +40,9 @@ struct ServerOptions {
   std::string tls_cert_file;
   std::string tls_key_file;
   std::string tls_client_ca_file;
-  // SQLite database file, opened at start (created if missing). A corrupt file, another
-  // application's database or a newer schema stops the start with the reason (docs/storage.md).
+  // The store, opened at start: a SQLite file (created if missing) or a postgresql:// URI. A
+  // corrupt file, an unreachable database, another application's database or a newer schema
+  // stops the start with the reason (docs/storage.md).
   std::string db_path = "objdb.sqlite";
   // Largest message accepted / sent, bytes (gRPC's default receive limit of 4 MiB is below one
   // 1280×720 depth + colour frame). Larger messages fail with RESOURCE_EXHAUSTED.

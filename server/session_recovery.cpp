@@ -318,12 +318,13 @@ Status ObjectDatabaseService::recoverSession(const storage::SessionInfo& stored)
           return name == stored.name ? saved.map : nullptr;
         });
     if (!report.ok()) {
-      if (absl::IsFailedPrecondition(report.status()) ||
-          absl::IsInvalidArgument(report.status())) {
-        continue;  // a segment the database cannot take (no surface at the mesh weight)
-      }
+      insert_errors_.fetch_add(1);
       return annotate(report.status(), absl::StrFormat("inserting segment %d of session %s",
                                                        segment.label, stored.name));
+    }
+    if (report->unusable) {
+      segments_unusable_.fetch_add(1);  // stored, held by no model
+      continue;
     }
     ++inserted;
   }

@@ -1,7 +1,8 @@
-// The server's storage interface (DESIGN.md "Persistence"): core/database's ModelStore plus what
+// The server's storage interface (docs/storage.md): core/database's ModelStore plus what
 // the service needs beyond it — sessions, saved live maps, model listings, checks, statistics,
 // checkpoints and online backups — and the plain value types those use. Backends implement it:
-// storage/sqlite/ (SqliteStore, one embedded file); storage/open_store.h opens one.
+// storage/sqlite/ (SqliteStore, one embedded file) and storage/postgres/ (PostgresStore, a
+// database several servers may share); storage/open_store.h opens one by its target.
 #pragma once
 
 #include <chrono>

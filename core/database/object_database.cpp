@@ -496,9 +496,18 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
                                                        const LiveScenes& live) {
   Prepared prepared;
   InsertReport& report = prepared.report;
-  prepared.incoming = model::buildModel(segment.grid.clone(), segment.label_voxels,
+  auto built = model::buildSegmentModel(segment.grid.clone(), segment.label_voxels,
                                         buildParams(segment.observation_depth_m));
-  if (!prepared.incoming.ok()) return prepared;
+  if (!built.ok()) {
+    prepared.error = built.status();
+    return prepared;
+  }
+  if (!built->model) {
+    report.unusable = true;
+    report.unusable_reason = built->unusable_reason;
+    return prepared;
+  }
+  prepared.incoming = std::move(built->model);
   model::ObjectModel& incoming = *prepared.incoming;
   incoming.observations = {{session, segment.label, segment.T_world_segment, Transform::Identity()}};
   report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
@@ -510,7 +519,7 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
     const auto t = Clock::now();
     auto grown = growInScene(session, incoming, live);
     if (!grown.ok()) {
-      prepared.incoming = grown.status();
+      prepared.error = grown.status();
       return prepared;
     }
     report.grown_plane_span_m = *grown;
@@ -552,7 +561,13 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
   record.parts = segment.parts;
   record.voxel_parts = segment.voxel_parts;
   OBJDB_RETURN_IF_ERROR(store_->putRawSegment(record));
-  OBJDB_RETURN_IF_ERROR(prepared.incoming.status());
+  OBJDB_RETURN_IF_ERROR(prepared.error);
+  if (!prepared.incoming) {
+    logger("database")->debug("segment {}/{} is unusable, stored without a model: {}", session,
+                              segment.label, report.unusable_reason);
+    report.timings.writer_hold_ms = msSince(locked);
+    return report;
+  }
   model::ObjectModel incoming = std::move(*prepared.incoming);
 
   std::vector<int64_t> candidates;

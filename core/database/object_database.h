@@ -92,6 +92,11 @@ struct InsertTimings {
 };
 
 struct InsertReport {
+  // The segment cannot be a model (model::SegmentModel: no surface at the mesh weight): it is
+  // stored as a raw segment and replaces its earlier contribution, but no model holds it
+  // (model_id 0). Not an error.
+  bool unusable = false;
+  std::string unusable_reason;
   int64_t model_id = 0;          // the model now holding the segment
   bool merged = false;           // merged into an existing model
   bool planar = false;
@@ -221,13 +226,15 @@ class ObjectDatabase {
   // planarity and structure tests (report: planar, structure, matchable, grown span, the P/K/D
   // timings). It runs before the writer lock, so that writers build their models in parallel.
   struct Prepared {
-    StatusOr<model::ObjectModel> incoming = absl::UnknownError("not built");
+    Status error;  // the build failed (returned once the raw segment is stored)
+    std::optional<model::ObjectModel> incoming;  // empty without an error: unusable
     InsertReport report;
   };
   Prepared prepareInsert(const std::string& session, const gsm::RawSegment& segment,
                          const LiveScenes& live);
-  // The rest under the lock. A segment whose model could not be built still replaces its earlier
-  // contribution and is stored as raw segment before the build's error is returned.
+  // The rest under the lock. A segment whose model could not be built, or that is unusable,
+  // still replaces its earlier contribution and is stored as raw segment before the build's
+  // error (or the unusable report) is returned.
   StatusOr<InsertReport> insertLocked(const std::string& session, const gsm::RawSegment& segment,
                                       const LiveScenes& live, Prepared prepared);
   StatusOr<int64_t> withdrawLocked(const std::string& session, gsm::Label label);

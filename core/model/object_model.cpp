@@ -166,8 +166,9 @@ PointCloud resampleCloud(const PointCloud& cloud, float spacing) {
   return out;
 }
 
-StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::VoxelIndex>& voxels,
-                                 const ModelBuildParams& params) {
+StatusOr<SegmentModel> buildSegmentModel(tsdf::TsdfLayer grid,
+                                         const std::vector<tsdf::VoxelIndex>& voxels,
+                                         const ModelBuildParams& params) {
   OBJDB_RETURN_IF_ERROR(params.model.validate());
   OBJDB_RETURN_IF_ERROR(params.keypoints.validate());
   OBJDB_RETURN_IF_ERROR(params.descriptors.validate());
@@ -178,11 +179,12 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
                          surfaceCloud(model.grid, voxels, params.mesh_min_weight));
   model.cloud = resampleCloud(surface, params.model.cloud_spacing_m);
   model.timings.cloud_ms = msSince(t);
+  SegmentModel out;
   if (model.cloud.points.empty()) {
-    return absl::FailedPreconditionError(absl::StrFormat(
-        "object model: the segment's %d voxels hold no surface (no zero crossing with weight >= "
-        "%g)",
-        voxels.size(), params.mesh_min_weight));
+    out.unusable_reason = absl::StrFormat(
+        "the segment's %d voxels hold no surface (no zero crossing with weight >= %g)",
+        voxels.size(), params.mesh_min_weight);
+    return out;
   }
   t = Clock::now();
   const SurfaceClass shape =
@@ -196,7 +198,8 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
   model.timings.planarity_ms = msSince(t);
   if (model.planar || model.structure ||
       model.cloud.points.size() < size_t(params.model.min_points)) {
-    return model;
+    out.model = std::move(model);
+    return out;
   }
   t = Clock::now();
   model.keypoint_indices = detectKeypoints(model.cloud, params.keypoints, nullptr, params.threads);
@@ -204,7 +207,17 @@ StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::V
   t = Clock::now();
   model.descriptors = computeFpfh(model.cloud, &model.keypoint_indices, params.descriptors, params.threads);
   model.timings.descriptors_ms = msSince(t);
-  return model;
+  out.model = std::move(model);
+  return out;
+}
+
+StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::VoxelIndex>& voxels,
+                                 const ModelBuildParams& params) {
+  OBJDB_ASSIGN_OR_RETURN(SegmentModel built, buildSegmentModel(std::move(grid), voxels, params));
+  if (!built.model) {
+    return absl::FailedPreconditionError("object model: " + built.unusable_reason);
+  }
+  return *std::move(built.model);
 }
 
 }  // namespace objdb::model

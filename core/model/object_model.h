@@ -9,6 +9,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -109,8 +110,21 @@ struct ModelBuildParams {
   float observation_depth_m = 0.0f;
 };
 
+// What a segment makes: a model, or none when the segment cannot be one, with the reason. A
+// segment is unusable when its voxels hold no surface at the mesh weight (no zero crossing
+// observed often enough): a normal outcome of extraction, not an error.
+struct SegmentModel {
+  std::optional<ObjectModel> model;  // empty: unusable
+  std::string unusable_reason;       // why, when `model` is empty
+};
+
 // Builds a model from a segment's grid and the voxels carrying its label (same frame; the grid
-// becomes the model's). Errors: no voxels, an empty surface, invalid params.
+// becomes the model's), or says the segment is unusable. Errors: no voxels, invalid params.
+StatusOr<SegmentModel> buildSegmentModel(tsdf::TsdfLayer grid,
+                                         const std::vector<tsdf::VoxelIndex>& voxels,
+                                         const ModelBuildParams& params);
+// The same for callers that need a model (a merge's rebuild, tests): an unusable segment is
+// FAILED_PRECONDITION with its reason.
 StatusOr<ObjectModel> buildModel(tsdf::TsdfLayer grid, const std::vector<tsdf::VoxelIndex>& voxels,
                                  const ModelBuildParams& params);
 

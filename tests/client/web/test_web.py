@@ -6,6 +6,7 @@ Every page must load without a JavaScript error or a failed request, and the 3D 
 """
 
 import json
+import ssl
 import os
 import subprocess
 import time
@@ -22,11 +23,11 @@ from conftest import BIN, ROOT, Process, Server
 ARTIFACTS = Path(os.environ.get("OBJDB_ARTIFACTS", ROOT / "build" / "test-artifacts" / "web"))
 
 
-def start_web(folder: Path, server_address: str, *args) -> Process:
+def start_web(folder: Path, server_address: str, *args, listen="127.0.0.1:0") -> Process:
     folder.mkdir(parents=True, exist_ok=True)
-    web = Process([BIN / "objdb", "web", "--server", server_address, "--listen", "127.0.0.1:0",
-                   *args], folder / "web.log", r"serving on (https?://127\.0\.0\.1:\d+)")
-    web.url = web.match.group(1)
+    web = Process([BIN / "objdb", "web", "--server", server_address, "--listen", listen, *args],
+                  folder / "web.log", r"serving on (https?)://[^:]+:(\d+)")
+    web.url = f"{web.match.group(1)}://127.0.0.1:{web.match.group(2)}"
     web.server_address = server_address
     return web
 
@@ -247,3 +248,34 @@ def test_a_web_token_guards_every_page(lounge, tmp_path):
             assert response.status == 200
     finally:
         web.stop()
+
+
+def test_https_and_a_token_serve_a_remote_address(lounge, tmp_path):
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key,
+                    "-out", cert, "-days", "1", "-subj", "/CN=localhost",
+                    "-addext", "subjectAltName=IP:127.0.0.1"], check=True, capture_output=True)
+    token = "https-web-viewer-token-0123456789"
+    (tmp_path / "token").write_text(token)
+    web = start_web(tmp_path / "https", lounge.server_address, "--https-cert", cert,
+                    "--https-key", key, "--web-token-file", tmp_path / "token",
+                    listen="0.0.0.0:0")
+    try:
+        assert web.url.startswith("https://")
+        context = ssl.create_default_context(cafile=str(cert))
+        request = urllib.request.Request(f"{web.url}/api/sessions",
+                                         headers={"Authorization": f"Bearer {token}"})
+        with urllib.request.urlopen(request, timeout=30, context=context) as response:
+            assert len(json.loads(response.read())["sessions"]) == 3
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(f"{web.url}/api/sessions", timeout=30, context=context)
+        assert e.value.code == 401
+    finally:
+        web.stop()
+    # HTTPS without a token is still refused on a remote address.
+    refused = subprocess.run([BIN / "objdb", "web", "--listen", "0.0.0.0:0", "--https-cert", cert,
+                              "--https-key", key], capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 1 and "refusing to serve" in refused.stderr
+    half = subprocess.run([BIN / "objdb", "web", "--https-cert", cert], capture_output=True,
+                          text=True, timeout=60)
+    assert half.returncode == 1 and "both --https-cert and --https-key" in half.stderr

@@ -687,6 +687,50 @@ TEST(ObjectDatabase, TheSegmentsOwnModelIsBuiltBeforeTheWriterLock) {
   EXPECT_LE(t.writer_hold_ms + t.keypoints_ms + t.descriptors_ms, t.total_ms + 1e-6);
 }
 
+// The segment with every voxel seen too rarely to hold a surface (weight below the mesh weight).
+gsm::RawSegment withoutSurface(gsm::RawSegment s) {
+  const int vps = s.grid.voxelsPerSide();
+  std::vector<tsdf::BlockIndex> indices;
+  for (const auto& [index, block] : s.grid.blocks()) indices.push_back(index);
+  for (const tsdf::BlockIndex& index : indices) {
+    for (int i = 0; i < vps * vps * vps; ++i) {
+      tsdf::TsdfVoxel* v =
+          s.grid.voxel(index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps)));
+      if (v->weight > 0.0f) v->weight = 1.0f;
+    }
+  }
+  return s;
+}
+
+TEST(ObjectDatabase, ASegmentWithoutSurfaceIsStoredAsUnusableNotAnError) {
+  Fixture f;
+  addScenes(&f.store);
+  const auto first = f.db->insertSegment("monday", segment(7, kMonday));
+  ASSERT_TRUE(first.ok()) << first.status();
+  EXPECT_FALSE(first->unusable);
+  ASSERT_EQ(f.store.modelIds().value().size(), 1u);
+  // Re-extracted without a surface: its earlier contribution goes, the raw segment is replaced,
+  // and no model holds it.
+  const auto again = f.db->insertSegment("monday", withoutSurface(segment(7, kMonday)));
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_TRUE(again->unusable);
+  EXPECT_THAT(again->unusable_reason, HasSubstr("hold no surface"));
+  EXPECT_TRUE(again->replaced_earlier);
+  EXPECT_EQ(again->model_id, 0);
+  EXPECT_TRUE(f.store.modelIds().value().empty());
+  const auto stored = f.store.rawSegment({"monday", 7});
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  EXPECT_EQ((*stored)->voxels.size(), segment(7, kMonday).label_voxels.size());
+  // The model builder says so explicitly; only buildModel, for callers that need a model,
+  // turns it into FAILED_PRECONDITION.
+  const gsm::RawSegment bare = withoutSurface(segment(7, kMonday));
+  const auto built = model::buildSegmentModel(bare.grid.clone(), bare.label_voxels, {});
+  ASSERT_TRUE(built.ok()) << built.status();
+  EXPECT_FALSE(built->model.has_value());
+  EXPECT_EQ(model::buildModel(bare.grid.clone(), bare.label_voxels, {}).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
 TEST(ObjectDatabase, BadInputIsAClearError) {
   Fixture f;
   const World a{boxWithBall(), pose(0, 0, 0)};
