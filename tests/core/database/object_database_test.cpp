@@ -92,8 +92,9 @@ TEST(ObjectDatabase, TwoPartialViewsInTwoSessionsBecomeOneModelWithBothPoses) {
   EXPECT_LE(merges[0].tsdf_rmse_m, 0.02);
 }
 
-// Every observed voxel of the segment's grid in one colour (as a coloured stream fuses it).
-gsm::RawSegment painted(gsm::RawSegment s, Rgb8 colour) {
+// Calls `change` on every observed voxel of the segment's grid.
+template <typename Change>
+gsm::RawSegment changeObserved(gsm::RawSegment s, Change change) {
   const int vps = s.grid.voxelsPerSide();
   std::vector<tsdf::BlockIndex> indices;
   for (const auto& [index, block] : s.grid.blocks()) indices.push_back(index);
@@ -101,10 +102,15 @@ gsm::RawSegment painted(gsm::RawSegment s, Rgb8 colour) {
     for (int i = 0; i < vps * vps * vps; ++i) {
       tsdf::TsdfVoxel* v =
           s.grid.voxel(index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps)));
-      if (v->weight > 0.0f) v->color = colour;
+      if (v->weight > 0.0f) change(v);
     }
   }
   return s;
+}
+
+// Every observed voxel of the segment's grid in one colour (as a coloured stream fuses it).
+gsm::RawSegment painted(gsm::RawSegment s, Rgb8 colour) {
+  return changeObserved(std::move(s), [&](tsdf::TsdfVoxel* v) { v->color = colour; });
 }
 
 TEST(ObjectDatabase, TheSameShapeInAnotherColourIsNotMerged) {
@@ -689,17 +695,7 @@ TEST(ObjectDatabase, TheSegmentsOwnModelIsBuiltBeforeTheWriterLock) {
 
 // The segment with every voxel seen too rarely to hold a surface (weight below the mesh weight).
 gsm::RawSegment withoutSurface(gsm::RawSegment s) {
-  const int vps = s.grid.voxelsPerSide();
-  std::vector<tsdf::BlockIndex> indices;
-  for (const auto& [index, block] : s.grid.blocks()) indices.push_back(index);
-  for (const tsdf::BlockIndex& index : indices) {
-    for (int i = 0; i < vps * vps * vps; ++i) {
-      tsdf::TsdfVoxel* v =
-          s.grid.voxel(index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps)));
-      if (v->weight > 0.0f) v->weight = 1.0f;
-    }
-  }
-  return s;
+  return changeObserved(std::move(s), [](tsdf::TsdfVoxel* v) { v->weight = 1.0f; });
 }
 
 TEST(ObjectDatabase, ASegmentWithoutSurfaceIsStoredAsUnusableNotAnError) {
