@@ -51,6 +51,10 @@ options:
   --drain-deadline-ms N   on shutdown, time calls in flight get to finish (default %d)
   --max-sessions N        sessions whose map is in memory at once (streaming, or not ended yet),
                           1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
+  --query-threads N       threads that run the queries (ListSessions, ListObjects, GetObject,
+                          GetStats), off gRPC's threads, 1..64 (default 4)
+  --query-queue N         queries that may wait for one of them, 1..100000 (default 256); one
+                          more is refused at once with RESOURCE_EXHAUSTED ("the server is busy")
   --auto-end-s N          end a session whose stream closed or broke after N seconds without
                           EndSession (its map is stored); 0 = never (default 600)
   --save-map-s S          save each open session's map every S seconds (and, unless
@@ -190,6 +194,10 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       int seconds = 0;
       if (!take_int(1, 24 * 3600, &seconds)) return false;
       cli->options.slow_reader_timeout = std::chrono::seconds(seconds);
+    } else if (arg == "--query-threads") {
+      if (!take_int(1, 64, &cli->options.query_threads)) return false;
+    } else if (arg == "--query-queue") {
+      if (!take_int(1, 100000, &cli->options.query_queue)) return false;
     } else if (arg == "--max-sessions") {
       if (!take_int(1, objdb::kMaxOpenSessions, &cli->options.max_open_sessions)) return false;
     } else if (arg == "--log-level") {

@@ -71,6 +71,10 @@ ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
     : options_(options),
       store_(store),
       db_(std::move(db)),
+      queries_(std::make_unique<QueryPool>("queries", options_.query_threads,
+                                           options_.query_queue)),
+      scenes_(std::make_unique<QueryPool>("scene meshes", options_.scene_threads,
+                                          options_.scene_queue)),
       database_queue_(std::make_unique<JobQueue>()) {
   server_id_ = options_.server_id.empty() ? defaultServerId() : options_.server_id;
   if (options_.auto_end_after.count() > 0) janitor_ = std::thread([this] { endIdleSessions(); });
@@ -139,6 +143,9 @@ void ObjectDatabaseService::stop() {
   keeper_wake_.notify_all();
   if (janitor_.joinable()) janitor_.join();
   for (auto& w : workers) w.thread.join();
+  // The queries waiting are answered (gRPC's drain waits for them), then the pools stop.
+  queries_->stop();
+  scenes_->stop();
   // No stream runs any more: every session not ended is ended here, its map stored, so that a
   // stop loses nothing (after what is queued already).
   std::vector<std::shared_ptr<LiveSession>> unended;
@@ -173,6 +180,23 @@ void ObjectDatabaseService::stop() {
     leased = leased_;
   }
   for (const auto& name : leased) releaseLease(name);
+}
+
+grpc::ServerUnaryReactor* ObjectDatabaseService::answerOffThread(
+    grpc::CallbackServerContext* context, std::function<Status()> work) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  const Status queued = queries_->submit([reactor, context, work = std::move(work)] {
+    if (context->IsCancelled()) {  // the client went away (or its deadline passed) meanwhile
+      reactor->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "the call ended before it ran"));
+      return;
+    }
+    reactor->Finish(toGrpcStatus(work()));
+  });
+  if (!queued.ok()) {
+    queries_refused_.fetch_add(1);
+    reactor->Finish(toGrpcStatus(queued));
+  }
+  return reactor;
 }
 
 void ObjectDatabaseService::startWorker(std::function<void()> work) {
@@ -446,43 +470,37 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
     if (Status recovering = checkNotRecovering(name); !recovering.ok()) {
       return finishUnary(context, recovering);
     }
-    auto stored = store_->sessions();
-    if (!stored.ok()) return finishUnary(context, stored.status());
-    for (const auto& s : *stored) {
-      if (s.name != name) continue;
-      if (s.state != storage::SessionState::kEnded) {
-        auto saved_frames = store_->savedMapFrames(name);
-        if (!saved_frames.ok()) return finishUnary(context, saved_frames.status());
-        if (*saved_frames >= 0) {
-          return finishUnary(context, recoveryFailed(name, *saved_frames));
+    return answerOffThread(context, [this, name, response]() -> Status {
+      OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+      for (const auto& s : stored) {
+        if (s.name != name) continue;
+        if (s.state != storage::SessionState::kEnded) {
+          OBJDB_ASSIGN_OR_RETURN(const int64_t saved_frames, store_->savedMapFrames(name));
+          if (saved_frames >= 0) return recoveryFailed(name, saved_frames);
+          OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const tsdf::TsdfLayer> scene,
+                                 store_->scene(name));
+          if (scene != nullptr) {
+            return absl::FailedPreconditionError(absl::StrFormat(
+                "session %s was not ended before the server stopped; it was ended at the next "
+                "start from its map saved after %d frames (its segments are in the database, its "
+                "scene is stored); the frames after it were lost",
+                name, s.frames));
+          }
+          return absl::FailedPreconditionError(absl::StrFormat(
+              "session %s was not ended before the server stopped; its map was not kept (the "
+              "segments inserted before are in the database), so it cannot be flushed any more",
+              name));
         }
-        auto scene = store_->scene(name);
-        if (!scene.ok()) return finishUnary(context, scene.status());
-        if (*scene != nullptr) {
-          return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
-                                          "session %s was not ended before the server stopped; "
-                                          "it was ended at the next start from its map saved "
-                                          "after %d frames (its segments are in the database, "
-                                          "its scene is stored); the frames after it were lost",
-                                          name, s.frames)));
-        }
-        return finishUnary(context, absl::FailedPreconditionError(absl::StrFormat(
-                                        "session %s was not ended before the server stopped; "
-                                        "its map was not kept (the segments inserted before are "
-                                        "in the database), so it cannot be flushed any more",
-                                        name)));
+        v1::SessionSummary& summary = *response->mutable_summary();
+        summary.set_session_name(name);
+        summary.set_state(v1::SESSION_STATE_ENDED);
+        summary.mutable_counters()->set_frames_integrated(uint64_t(s.frames));
+        OBJDB_ASSIGN_OR_RETURN(const std::vector<uint64_t> ids, objectsOf(name));
+        for (uint64_t id : ids) summary.add_object_ids(id);
+        return absl::OkStatus();
       }
-      v1::SessionSummary& summary = *response->mutable_summary();
-      summary.set_session_name(name);
-      summary.set_state(v1::SESSION_STATE_ENDED);
-      summary.mutable_counters()->set_frames_integrated(uint64_t(s.frames));
-      auto ids = objectsOf(name);
-      if (!ids.ok()) return finishUnary(context, ids.status());
-      for (uint64_t id : *ids) summary.add_object_ids(id);
-      return finishUnary(context, absl::OkStatus());
-    }
-    return finishUnary(context,
-                       absl::NotFoundError(absl::StrFormat("no session named \"%s\"", name)));
+      return absl::NotFoundError(absl::StrFormat("no session named \"%s\"", name));
+    });
   }
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   // On the database thread, after every segment queued before it: flush once, then answer. A

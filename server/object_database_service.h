@@ -16,7 +16,9 @@
 //   sends the SegmentExtracted and ObjectEvent messages back on the stream.
 // - EndSession flushes the map (every live label), inserts the rest, stores the scene map and
 //   ends the session, on the database thread.
-// - The queries read the store (storage/store.h).
+// - The queries read the store (storage/store.h) on a bounded pool of their own
+//   (server/query_pool.h), GetSceneMesh on another: gRPC's callback threads only take and answer
+//   calls, and a full pool refuses at once (RESOURCE_EXHAUSTED).
 // - A session's map lives in memory from its header to EndSession. A server that stops ends
 //   every session not ended yet and stores its map; only a crash loses the frames after the
 //   session's last saved map (--save-map-s), and the next start ends it from that map.
@@ -37,6 +39,7 @@
 #include "core/common/status.h"
 #include "core/database/object_database.h"
 #include "objdb/v1/objdb.grpc.pb.h"
+#include "server/query_pool.h"
 #include "storage/store.h"
 
 namespace objdb::database {
@@ -81,6 +84,13 @@ struct ServiceOptions {
   std::chrono::milliseconds lease_ttl{15 * 1000};
   // Every call must carry "authorization: Bearer <token>" (server/auth.h); empty = no token.
   std::string token;
+  // The unary queries' pool (ListSessions, ListObjects, GetObject, GetStats, EndSession of a
+  // session not in memory) and GetSceneMesh's: threads, and calls that may wait for one; more
+  // are refused with RESOURCE_EXHAUSTED.
+  int query_threads = 4;
+  size_t query_queue = 256;
+  int scene_threads = 2;
+  size_t scene_queue = 16;
 };
 
 class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
@@ -139,6 +149,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // RESOURCE_EXHAUSTED when max_open_sessions sessions are not ended (mutex_ held).
   Status checkSessionLimit();
   void startWorker(std::function<void()> work);
+  // Runs `work` (which fills the call's response) on the query pool and finishes the call with
+  // its status; a full or stopped pool answers at once.
+  grpc::ServerUnaryReactor* answerOffThread(grpc::CallbackServerContext* context,
+                                            std::function<Status()> work);
   void runStream(std::shared_ptr<IngestStream> stream);
   // The frame worker is done with the session's map: hands EndSession jobs that waited for it to
   // the database queue; an interrupted session is stored as such (on the database thread).
@@ -251,6 +265,8 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::thread keeper_;
   std::atomic<uint64_t> sessions_taken_over_{0};
   std::atomic<uint64_t> leases_lost_{0};
+  std::atomic<uint64_t> queries_refused_{0};  // a pool was full
+  std::unique_ptr<QueryPool> queries_, scenes_;  // stopped by stop(), after the streams
   std::unique_ptr<JobQueue> database_queue_;  // last: its thread stops first
 };
 

@@ -118,22 +118,22 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListSessions(
   if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
     return finishUnary(context, allowed);
   }
-  auto after = parsePageToken(request->page_token(), 's', 0);
-  if (!after.ok()) return finishUnary(context, after.status());
-  auto stored = store_->sessions();
-  if (!stored.ok()) return finishUnary(context, stored.status());
-  const uint32_t limit = pageSize(request->page_size());
-  int64_t last = *after;
-  for (const auto& s : *stored) {
-    if (s.id <= *after) continue;
-    if (response->sessions_size() == int(limit)) {
-      response->set_next_page_token(pageToken('s', last, 0));
-      break;
+  return answerOffThread(context, [this, request, response]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(const int64_t after, parsePageToken(request->page_token(), 's', 0));
+    OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+    const uint32_t limit = pageSize(request->page_size());
+    int64_t last = after;
+    for (const auto& s : stored) {
+      if (s.id <= after) continue;
+      if (response->sessions_size() == int(limit)) {
+        response->set_next_page_token(pageToken('s', last, 0));
+        break;
+      }
+      describe(s, response->add_sessions());
+      last = s.id;
     }
-    describe(s, response->add_sessions());
-    last = s.id;
-  }
-  return finishUnary(context, absl::OkStatus());
+    return absl::OkStatus();
+  });
 }
 
 grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServerContext* context,
@@ -142,43 +142,44 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServe
   if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
     return finishUnary(context, allowed);
   }
-  const uint64_t filter = std::hash<std::string>()(request->session_name()) * 4 +
-                          (request->include_merged() ? 1 : 0) +
-                          (request->include_structure() ? 2 : 0);
-  auto after = parsePageToken(request->page_token(), 'o', filter);
-  if (!after.ok()) return finishUnary(context, after.status());
-  if (!request->session_name().empty()) {
-    auto stored = store_->sessions();
-    if (!stored.ok()) return finishUnary(context, stored.status());
-    const bool known = std::any_of(stored->begin(), stored->end(), [&](const auto& s) {
-      return s.name == request->session_name();
-    });
-    if (!known) {
-      return finishUnary(context, absl::NotFoundError(absl::StrFormat(
-                                      "no session named \"%s\"", request->session_name())));
+  return answerOffThread(context, [this, request, response]() -> Status {
+    const uint64_t filter = std::hash<std::string>()(request->session_name()) * 4 +
+                            (request->include_merged() ? 1 : 0) +
+                            (request->include_structure() ? 2 : 0);
+    OBJDB_ASSIGN_OR_RETURN(const int64_t after,
+                           parsePageToken(request->page_token(), 'o', filter));
+    if (!request->session_name().empty()) {
+      OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
+      const bool known = std::any_of(stored.begin(), stored.end(), [&](const auto& s) {
+        return s.name == request->session_name();
+      });
+      if (!known) {
+        return absl::NotFoundError(
+            absl::StrFormat("no session named \"%s\"", request->session_name()));
+      }
     }
-  }
-  storage::ModelQuery query;
-  query.after_id = *after;
-  query.limit = pageSize(request->page_size()) + 1;  // one more: is there a next page?
-  query.session = request->session_name();
-  query.include_merged = request->include_merged();
-  query.include_structure = request->include_structure();
-  auto models = store_->modelSummaries(query);
-  if (!models.ok()) return finishUnary(context, models.status());
-  const bool more = models->size() == query.limit;
-  if (more) models->pop_back();
-  for (const auto& m : *models) {
-    v1::ObjectSummary* summary = response->add_objects();
-    toProto(m, summary);
-    if (!request->include_parts()) continue;
-    if (const Status parts = addParts(*store_, m, false, summary->mutable_parts()); !parts.ok()) {
-      response->Clear();
-      return finishUnary(context, parts);
+    storage::ModelQuery query;
+    query.after_id = after;
+    query.limit = pageSize(request->page_size()) + 1;  // one more: is there a next page?
+    query.session = request->session_name();
+    query.include_merged = request->include_merged();
+    query.include_structure = request->include_structure();
+    OBJDB_ASSIGN_OR_RETURN(std::vector<storage::ModelSummary> models,
+                           store_->modelSummaries(query));
+    const bool more = models.size() == query.limit;
+    if (more) models.pop_back();
+    for (const auto& m : models) {
+      v1::ObjectSummary* summary = response->add_objects();
+      toProto(m, summary);
+      if (!request->include_parts()) continue;
+      if (const Status parts = addParts(*store_, m, false, summary->mutable_parts()); !parts.ok()) {
+        response->Clear();
+        return parts;
+      }
     }
-  }
-  if (more) response->set_next_page_token(pageToken('o', models->back().id, filter));
-  return finishUnary(context, absl::OkStatus());
+    if (more) response->set_next_page_token(pageToken('o', models.back().id, filter));
+    return absl::OkStatus();
+  });
 }
 
 grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerContext* context,
@@ -187,7 +188,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
   if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
     return finishUnary(context, allowed);
   }
-  auto run = [&]() -> Status {
+  auto run = [this, request, response]() -> Status {
     if (request->id() == 0 || request->id() > uint64_t(INT64_MAX)) {
       return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
     }
@@ -251,12 +252,14 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
     }
     return absl::OkStatus();
   };
-  const Status status = run();
-  if (!status.ok()) response->Clear();
-  return finishUnary(context, status);
+  return answerOffThread(context, [run, response] {
+    const Status status = run();
+    if (!status.ok()) response->Clear();
+    return status;
+  });
 }
 
-// Streams a session's mesh in chunks; the mesh is made on a worker thread.
+// Streams a session's mesh in chunks; the mesh is made on the scene pool's threads.
 class SceneMeshReactor final : public grpc::ServerWriteReactor<v1::MeshChunk> {
  public:
   void start(std::vector<TriangleMesh> chunks) {
@@ -311,7 +314,7 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
   auto* reactor = new SceneMeshReactor();
   const std::string name = request->session_name();
   const bool completed = request->completed();
-  startWorker([this, reactor, name, completed, context] {
+  const Status queued = scenes_->submit([this, reactor, name, completed, context] {
     auto run = [&]() -> StatusOr<std::vector<TriangleMesh>> {
       OBJDB_RETURN_IF_ERROR(checkNotRecovering(name));
       OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
@@ -361,6 +364,10 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
     if (chunks->empty()) chunks->emplace_back();  // one (empty, last) chunk: the mesh is empty
     reactor->start(*std::move(chunks));
   });
+  if (!queued.ok()) {
+    queries_refused_.fetch_add(1);
+    reactor->fail(queued);
+  }
   return reactor;
 }
 
@@ -370,7 +377,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
   if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
     return finishUnary(context, allowed);
   }
-  auto run = [&]() -> Status {
+  auto run = [this, response]() -> Status {
     OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
     OBJDB_ASSIGN_OR_RETURN(const storage::StoreStats stats, store_->stats());
     response->set_server_version(options_.version);
@@ -428,9 +435,10 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
     response->set_leases_lost(leases_lost_.load());
     response->set_segments_unusable(segments_unusable_.load());
     response->set_insert_errors(insert_errors_.load());
+    response->set_queries_refused(queries_refused_.load());
     return absl::OkStatus();
   };
-  return finishUnary(context, run());
+  return answerOffThread(context, run);
 }
 
 }  // namespace objdb::server

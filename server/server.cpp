@@ -47,6 +47,11 @@ Status ServerOptions::validate() const {
     return absl::InvalidArgumentError(absl::StrFormat(
         "max_open_sessions is %d, must be in [1, %d]", max_open_sessions, kMaxOpenSessions));
   }
+  if (query_threads < 1 || query_threads > 64 || query_queue < 1 || query_queue > 100000) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "query_threads is %d (must be in [1, 64]) and query_queue %d (must be in [1, 100000])",
+        query_threads, query_queue));
+  }
   if (auto_end_after.count() < 0 || auto_end_after > std::chrono::hours(24 * 7)) {
     return absl::InvalidArgumentError(
         absl::StrFormat("auto_end_after is %d ms, must be in [0, one week]",
@@ -105,6 +110,8 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   service_options.frame_queue = size_t(options.frame_queue);
   service_options.segment_queue = size_t(options.segment_queue);
   service_options.max_open_sessions = size_t(options.max_open_sessions);
+  service_options.query_threads = options.query_threads;
+  service_options.query_queue = size_t(options.query_queue);
   service_options.auto_end_after = options.auto_end_after;
   service_options.save_map_every = options.save_map_every;
   service_options.server_id = options.server_id;

@@ -67,6 +67,10 @@ struct ServerOptions {
   // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a
   // room at 2 cm). One more Ingest is refused with RESOURCE_EXHAUSTED.
   int max_open_sessions = 16;
+  // Queries run on a pool of their own (server/query_pool.h), off gRPC's threads: its threads
+  // and the calls that may wait for one; more are refused with RESOURCE_EXHAUSTED.
+  int query_threads = 4;
+  int query_queue = 256;
   // A session whose stream closed (or broke) and that gets no EndSession for this long is ended
   // by the server: its map is stored and its segments inserted. 0 = never.
   std::chrono::milliseconds auto_end_after{10 * 60 * 1000};
