@@ -20,7 +20,7 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
 
   // The reader: acks drive the progress bar; rejections and (with -v) events are printed.
   std::mutex print_mutex;
-  size_t acked = 0, rejected = 0, segments = 0, created = 0, merged = 0, joined = 0;
+  size_t acked = 0, rejected = 0, segments = 0, created = 0, merged = 0, joined = 0, removed = 0;
   v1::SessionSummary summary;
   ProgressBar bar("  segmenting, fusing, inserting on the server", frames);
   std::thread reader([&] {
@@ -47,7 +47,15 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
           }
           break;
         case v1::IngestResponse::kObject:
-          if (response.object().kind() == v1::ObjectEvent::MERGED &&
+          if (response.object().kind() == v1::ObjectEvent::REMOVED) {
+            ++removed;
+            if (options.verbose) {
+              std::printf("  object %llu removed (its only segment was re-extracted or withdrawn"
+                          "; now in object %llu)\n",
+                          (unsigned long long)response.object().object_id(),
+                          (unsigned long long)response.object().into_object_id());
+            }
+          } else if (response.object().kind() == v1::ObjectEvent::MERGED &&
               response.object().object_id() != 0) {
             ++joined;
             if (options.verbose) {
@@ -117,8 +125,8 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   if (!load_error.ok()) return reportError(command, load_error);
   if (!status.ok()) return reportRpcError(command, "Ingest of session " + name, options.connection.server, status);
   std::printf("  %zu frames acked (%zu rejected), %zu segments into the database (%zu new objects, "
-              "%zu merged into earlier ones; %zu objects merged into others)\n",
-              acked, rejected, segments, created, merged, joined);
+              "%zu merged into earlier ones; %zu objects merged into others, %zu removed)\n",
+              acked, rejected, segments, created, merged, joined, removed);
   if (!options.end) {
     std::printf("  session %s left open (--no-end)\n", name.c_str());
     return 0;

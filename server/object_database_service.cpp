@@ -325,11 +325,24 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     logger("server")->warn("{}", failed.ToString());
     return failInsert(stream, failed);
   }
+  if (report->removed_model != 0) {
+    std::lock_guard lock(session.mutex);
+    session.counters.set_objects_removed(session.counters.objects_removed() + 1);
+  }
   if (report->unusable) {
     // Stored as a raw segment (it replaced any earlier version of itself), held by no model.
     segments_unusable_.fetch_add(1);
     logger("server")->debug("session {}: segment {} stored without a model: {}", session.name,
                             segment.label, report->unusable_reason);
+    if (stream != nullptr && report->removed_model != 0) {
+      const auto segment_id = store_->rawSegmentId({session.name, segment.label});
+      const uint64_t id = segment_id.ok() ? uint64_t(*segment_id) : 0;
+      for (v1::ObjectEvent& o : objectEvents(*report, id)) {
+        v1::IngestResponse event;
+        *event.mutable_object() = std::move(o);
+        stream->send(std::move(event));
+      }
+    }
     return absl::OkStatus();
   }
   candidates_skipped_.fetch_add(report->unreadable_candidates);
@@ -404,8 +417,19 @@ Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* strea
   logger("server")->debug("session {}: segment {} withdrawn from object {} (its label merged "
                           "into another or its voxels taken)",
                           session.name, label, *model);
-  std::lock_guard lock(session.mutex);
-  session.counters.set_segments_withdrawn(session.counters.segments_withdrawn() + 1);
+  const bool removed = !db_->holds(*model);  // it was the object's only segment
+  {
+    std::lock_guard lock(session.mutex);
+    session.counters.set_segments_withdrawn(session.counters.segments_withdrawn() + 1);
+    if (removed) session.counters.set_objects_removed(session.counters.objects_removed() + 1);
+  }
+  if (removed && stream != nullptr) {
+    const auto segment_id = store_->rawSegmentId({session.name, label});
+    v1::IngestResponse event;
+    *event.mutable_object() =
+        removedEvent(*model, 0, segment_id.ok() ? uint64_t(*segment_id) : 0);
+    stream->send(std::move(event));
+  }
   return absl::OkStatus();
 }
 

@@ -415,10 +415,25 @@ void toProto(const database::CandidateResult& r, v1::MergeEvidence* ev) {
   ev->set_loosened(r.loosened);
 }
 
+v1::ObjectEvent removedEvent(int64_t removed, int64_t now_in, uint64_t segment_id) {
+  v1::ObjectEvent e;
+  e.set_kind(v1::ObjectEvent::REMOVED);
+  e.set_object_id(uint64_t(removed));
+  e.set_into_object_id(uint64_t(now_in));
+  e.set_segment_id(segment_id);
+  return e;
+}
+
 std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
                                           uint64_t segment_id) {
-  std::vector<v1::ObjectEvent> events(1);
-  v1::ObjectEvent& o = events.front();
+  std::vector<v1::ObjectEvent> events;
+  if (report.unusable) {
+    if (report.removed_model != 0) {
+      events.push_back(removedEvent(report.removed_model, 0, segment_id));
+    }
+    return events;
+  }
+  v1::ObjectEvent& o = events.emplace_back();
   o.set_segment_id(segment_id);
   if (report.merged) {
     o.set_kind(v1::ObjectEvent::MERGED);
@@ -431,6 +446,11 @@ std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
   } else {
     o.set_kind(v1::ObjectEvent::CREATED);
     o.set_object_id(uint64_t(report.model_id));
+  }
+  // The segment's earlier version emptied its old object: after the segment's own event, so the
+  // object it moved to is known.
+  if (report.removed_model != 0) {
+    events.push_back(removedEvent(report.removed_model, report.model_id, segment_id));
   }
   for (const auto& r : report.co_accepted) {
     if (!r.accepted) continue;

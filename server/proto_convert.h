@@ -65,8 +65,11 @@ void toProto(const storage::ModelSummary& model, v1::ObjectSummary* out);
 
 // A merge's evidence (the accepted candidate's numbers).
 void toProto(const database::CandidateResult& merge, v1::MergeEvidence* out);
+// REMOVED: object `removed` is gone; the segment is in `now_in` (0: none).
+v1::ObjectEvent removedEvent(int64_t removed, int64_t now_in, uint64_t segment_id);
 // What one insert did to the objects, as Ingest announces it: CREATED (a new object) or MERGED
-// (into an object), then one MERGED per existing object that joined the surviving one.
+// (into an object); REMOVED when the segment's earlier version emptied its old object; then one
+// MERGED per existing object that joined the surviving one. An unusable segment: only REMOVED.
 std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
                                           uint64_t segment_id);
 

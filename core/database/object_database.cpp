@@ -160,7 +160,7 @@ StatusOr<float> ObjectDatabase::growInScene(const std::string& session,
   return span;
 }
 
-Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_id) {
+StatusOr<bool> ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_id) {
   OBJDB_ASSIGN_OR_RETURN(auto held, loadModel(model_id));
   std::vector<model::Observation> remaining;
   for (const auto& o : held->observations) {
@@ -179,7 +179,14 @@ Status ObjectDatabase::removeContribution(const SegmentKey& key, int64_t model_i
   }
   segment_model_.erase(key);
   changed(model_id, std::move(entry));
-  return absl::OkStatus();
+  return remaining.empty();
+}
+
+bool ObjectDatabase::holds(int64_t id) const {
+  for (const auto& [key, model] : segment_model_) {
+    if (model == id) return true;
+  }
+  return false;
 }
 
 StatusOr<int64_t> ObjectDatabase::withdrawLocked(const std::string& session, gsm::Label label) {
@@ -187,7 +194,7 @@ StatusOr<int64_t> ObjectDatabase::withdrawLocked(const std::string& session, gsm
   const auto it = segment_model_.find(key);
   if (it == segment_model_.end()) return int64_t{0};
   const int64_t model_id = it->second;
-  OBJDB_RETURN_IF_ERROR(removeContribution(key, model_id));
+  OBJDB_RETURN_IF_ERROR(removeContribution(key, model_id).status());
   return model_id;
 }
 
@@ -547,7 +554,9 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
   const SegmentKey key{session, segment.label};
   if (const auto it = segment_model_.find(key); it != segment_model_.end()) {
     const auto t = Clock::now();
-    OBJDB_RETURN_IF_ERROR(removeContribution(key, it->second));
+    const int64_t earlier = it->second;
+    OBJDB_ASSIGN_OR_RETURN(const bool emptied, removeContribution(key, earlier));
+    if (emptied) report.removed_model = earlier;
     report.replaced_earlier = true;
     report.timings.replace_ms = msSince(t);
   }

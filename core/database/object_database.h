@@ -106,6 +106,9 @@ struct InsertReport {
   float grown_plane_span_m = 0.0f;
   bool matchable = false;
   bool replaced_earlier = false; // the segment's key had been inserted before
+  // Replacing that earlier contribution emptied this model, and the store removed it (0: none).
+  // The segment is now held by model_id (0 when unusable).
+  int64_t removed_model = 0;
   size_t candidates = 0;         // after the prefilter, readable
   size_t unreadable_candidates = 0;  // prefilter candidates whose stored data failed to load
   std::vector<CandidateResult> results;  // one per candidate, in candidate order
@@ -141,6 +144,9 @@ class ObjectDatabase {
   // the store; a pose with neither rejects the candidate (counted in scenes_missing).
   StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment,
                                        const LiveScenes& live = {});
+  // Whether model `id` still holds a segment this database knows of (false once a withdrawal or
+  // a replacement emptied it and the store removed it).
+  bool holds(int64_t id) const;
 
   // Takes back segment (session, label), which the GSM withdrew (merged into another label, or
   // lost its voxels to others: gsm::Gsm::takeWithdrawn): the model that holds it is rebuilt
@@ -164,7 +170,9 @@ class ObjectDatabase {
   model::ModelBuildParams buildParams(float observation_depth_m) const;
   StatusOr<model::ObjectModel> buildFromObservations(std::vector<model::Observation> observations,
                                                      int64_t id);
-  Status removeContribution(const SegmentKey& key, int64_t model_id);
+  // Takes the segment `key` out of model `model_id`; true when that emptied the model, which the
+  // store then removed.
+  StatusOr<bool> removeContribution(const SegmentKey& key, int64_t model_id);
   // The scene map of `session`: the live one when `live` has it, else the store's (null: none).
   StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> sceneOf(const std::string& session,
                                                            const LiveScenes& live) const;

@@ -33,6 +33,29 @@ TEST(ObjectEvents, ANewObjectIsCreated) {
   EXPECT_FALSE(events[0].has_evidence());
 }
 
+// A re-extracted segment whose earlier version was object 7's only segment: it became object 12,
+// and object 7 is gone.
+TEST(ObjectEvents, AnObjectEmptiedByAReExtractionIsRemovedAfterTheSegmentsEvent) {
+  database::InsertReport report;
+  report.model_id = 12;
+  report.replaced_earlier = true;
+  report.removed_model = 7;
+  auto events = objectEvents(report, 40);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].kind(), v1::ObjectEvent::CREATED);
+  EXPECT_EQ(events[1].kind(), v1::ObjectEvent::REMOVED);
+  EXPECT_EQ(events[1].object_id(), 7u);
+  EXPECT_EQ(events[1].into_object_id(), 12u);
+  EXPECT_EQ(events[1].segment_id(), 40u);
+  // Re-extracted without a surface: only the removal, and no object holds the segment.
+  report.unusable = true;
+  report.model_id = 0;
+  events = objectEvents(report, 40);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind(), v1::ObjectEvent::REMOVED);
+  EXPECT_EQ(events[0].into_object_id(), 0u);
+}
+
 // The segment merged into object 9 (the lowest e_TSDF); object 26 took it too and joined 9
 // afterwards, object 32 took it but failed the check against 9.
 TEST(ObjectEvents, ObjectsThatJoinTheSurvivorEachGetAMergedEventAfterTheSegments) {

@@ -74,7 +74,9 @@ class MergeEvidence:
 @dataclass
 class ObjectEvent:
     """kind "created": segment_id became object object_id. kind "merged": the segment
-    (object_id 0) or the existing object object_id merged into into_object_id."""
+    (object_id 0) or the existing object object_id merged into into_object_id. kind "removed":
+    object object_id is gone (its only segment, segment_id, was re-extracted or withdrawn); the
+    segment is in into_object_id now (0: none)."""
 
     kind: str
     object_id: int

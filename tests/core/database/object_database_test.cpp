@@ -391,12 +391,14 @@ TEST(ObjectDatabase, AWithdrawnSegmentLeavesItsModel) {
   auto withdrawn = f.db->withdrawSegment("tuesday", 3);
   ASSERT_TRUE(withdrawn.ok()) << withdrawn.status();
   EXPECT_EQ(*withdrawn, first->model_id);
+  EXPECT_TRUE(f.db->holds(first->model_id));  // Monday's segment is still in it
   auto model = f.store.model(first->model_id).value();
   ASSERT_EQ(model->observations.size(), 1u);
   EXPECT_EQ(model->observations[0].session, "monday");
   // A segment the database never took: nothing to do. The last segment of a model: it goes.
   EXPECT_EQ(f.db->withdrawSegment("tuesday", 99).value(), 0);
   EXPECT_EQ(f.db->withdrawSegment("monday", 7).value(), first->model_id);
+  EXPECT_FALSE(f.db->holds(first->model_id));  // the server announces it as REMOVED
   EXPECT_TRUE(f.store.modelIds().value().empty());
   // Inserted again afterwards, it is a new model like any other.
   auto again = f.db->insertSegment("monday", segment(7, kMonday, -0.3f, 0.1f));
@@ -712,6 +714,8 @@ TEST(ObjectDatabase, ASegmentWithoutSurfaceIsStoredAsUnusableNotAnError) {
   EXPECT_TRUE(again->unusable);
   EXPECT_THAT(again->unusable_reason, HasSubstr("hold no surface"));
   EXPECT_TRUE(again->replaced_earlier);
+  EXPECT_EQ(again->removed_model, first->model_id);  // it was that model's only segment
+  EXPECT_FALSE(f.db->holds(first->model_id));
   EXPECT_EQ(again->model_id, 0);
   EXPECT_TRUE(f.store.modelIds().value().empty());
   const auto stored = f.store.rawSegment({"monday", 7});
