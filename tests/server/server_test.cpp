@@ -5,10 +5,13 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "objdb/v1/objdb.grpc.pb.h"
@@ -144,6 +147,13 @@ TEST(ObjdbServer, StartRejectsInvalidOptions) {
   options = loopbackOptions();
   options.slow_reader_timeout = std::chrono::milliseconds(0);
   EXPECT_NE(options.validate().message().find("slow_reader_timeout is 0 ms"), std::string::npos);
+  // The query pool's bounds.
+  options = loopbackOptions();
+  options.query_threads = 0;
+  EXPECT_NE(options.validate().message().find("query_threads is 0"), std::string::npos);
+  options = loopbackOptions();
+  options.query_queue = 0;
+  EXPECT_NE(options.validate().message().find("query_queue 0"), std::string::npos);
 }
 
 TEST(ObjdbServer, MessageAboveTheReceiveLimitIsResourceExhaustedAndServerCarriesOn) {
@@ -158,6 +168,52 @@ TEST(ObjdbServer, MessageAboveTheReceiveLimitIsResourceExhaustedAndServerCarries
   const grpc::Status small = checkHealth(server->address(), "", &response);
   ASSERT_TRUE(small.ok()) << small.error_message();
   EXPECT_EQ(response.status(), HealthCheckResponse::SERVING);
+}
+
+// A flood of queries against a small query pool: every call is answered, or refused at once as
+// busy (RESOURCE_EXHAUSTED), none hangs or fails otherwise, and GetStats counts the refusals.
+TEST(ObjdbServer, AFloodOfQueriesIsAnsweredOrRefusedAsBusyNeverHung) {
+  ServerOptions options = loopbackOptions();
+  options.query_threads = 1;
+  options.query_queue = 2;
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::ObjectDatabase::NewStub(channelTo(server->address()));
+  constexpr int kClients = 8, kCallsEach = 40;
+  std::atomic<int> answered{0}, busy{0}, other{0};
+  std::vector<std::thread> clients;
+  for (int c = 0; c < kClients; ++c) {
+    clients.emplace_back([&] {
+      for (int i = 0; i < kCallsEach; ++i) {
+        grpc::ClientContext context;
+        setDeadline(&context);
+        v1::GetStatsResponse response;
+        const grpc::Status s = stub->GetStats(&context, v1::GetStatsRequest(), &response);
+        if (s.ok()) {
+          ++answered;
+        } else if (s.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED &&
+                   s.error_message().find("the server is busy") != std::string::npos) {
+          ++busy;
+        } else {
+          ++other;
+        }
+      }
+    });
+  }
+  for (auto& t : clients) t.join();
+  EXPECT_EQ(other.load(), 0);
+  EXPECT_EQ(answered.load() + busy.load(), kClients * kCallsEach);
+  EXPECT_GT(answered.load(), 0);
+  std::printf("%d GetStats from %d clients at once on 1 query thread with 2 waiting: %d answered, "
+              "%d refused as busy\n", kClients * kCallsEach, kClients, answered.load(),
+              busy.load());
+  v1::GetStatsResponse stats;
+  for (int attempt = 0; attempt < 100; ++attempt) {  // this call may be refused too: it is alone
+    grpc::ClientContext context;
+    setDeadline(&context);
+    if (stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok()) break;
+  }
+  EXPECT_EQ(stats.queries_refused(), uint64_t(busy.load()));
 }
 
 TEST(ServerOptions, DefaultsAreValidAndMatchTheDocumentation) {
