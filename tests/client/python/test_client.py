@@ -3,6 +3,7 @@ queries with known answers, and every bad input as a clear error."""
 
 import json
 import shutil
+import threading
 import time
 
 import grpc
@@ -150,11 +151,23 @@ def wait_for_state(db, session, state, seconds=30):
 
 
 def test_a_bad_frame_is_a_value_error_and_the_stream_is_cancelled_not_left_open(server):
-    frames = plane_frames(4)
-    frames[2].depth = np.zeros((10, 10), np.float32)
+    # The bad frame comes once the server has acknowledged the good ones, so that the session
+    # exists when the stream is cancelled (else whether the header got there is a race).
+    acked = threading.Event()
+
+    def frames():
+        good = plane_frames(3)
+        yield good[0]
+        yield good[1]
+        acked.wait(60)
+        good[2].depth = np.zeros((10, 10), np.float32)
+        yield good[2]
+
     with objdb.Client(server.address) as db:
         with pytest.raises(ValueError, match=r"frame 2: depth has shape \(10, 10\)"):
-            stream_all(db, frames, "bad", intrinsics=K)
+            for event in db.stream(frames(), session="bad", intrinsics=K):
+                if isinstance(event, objdb.FrameAck) and event.index == 1:
+                    acked.set()
         assert wait_for_state(db, "bad", "interrupted")
         # Interrupted, not lost: EndSession still flushes what was integrated.
         assert db.end_session("bad").state == "ended"
