@@ -128,8 +128,8 @@ int runIngestCommand(int argc, char** argv) {
     auto insert = [&](std::vector<gsm::RawSegment> segments,
                       std::vector<gsm::Label> withdrawn) -> Status {
       for (const gsm::Label label : withdrawn) {  // before the survivors' new segments
-        OBJDB_ASSIGN_OR_RETURN(const int64_t model, (*db)->withdrawSegment(name, label));
-        withdrawn_count += model != 0 ? 1 : 0;
+        OBJDB_ASSIGN_OR_RETURN(const auto withdrawal, (*db)->withdrawSegment(name, label));
+        withdrawn_count += withdrawal.model_id != 0 ? 1 : 0;
       }
       if (segments.empty()) return absl::OkStatus();
       // The session's scene is stored at its end: until then its poses are verified against the

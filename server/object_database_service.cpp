@@ -406,28 +406,29 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
 
 Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* stream,
                                        gsm::Label label) {
-  const StatusOr<int64_t> model = db_->withdrawSegment(session.name, label);
-  if (!model.ok()) {
+  const auto withdrawn = db_->withdrawSegment(session.name, label);
+  if (!withdrawn.ok()) {
     const Status failed = annotate(
-        model.status(), absl::StrFormat("withdrawing segment %d of session %s from the database",
-                                        label, session.name));
+        withdrawn.status(), absl::StrFormat("withdrawing segment %d of session %s from the database",
+                                            label, session.name));
     return failInsert(stream, failed);
   }
-  if (*model == 0) return absl::OkStatus();  // never inserted
+  if (withdrawn->model_id == 0) return absl::OkStatus();  // never inserted
   logger("server")->debug("session {}: segment {} withdrawn from object {} (its label merged "
                           "into another or its voxels taken)",
-                          session.name, label, *model);
-  const bool removed = !db_->holds(*model);  // it was the object's only segment
+                          session.name, label, withdrawn->model_id);
   {
     std::lock_guard lock(session.mutex);
     session.counters.set_segments_withdrawn(session.counters.segments_withdrawn() + 1);
-    if (removed) session.counters.set_objects_removed(session.counters.objects_removed() + 1);
+    if (withdrawn->removed) {
+      session.counters.set_objects_removed(session.counters.objects_removed() + 1);
+    }
   }
-  if (removed && stream != nullptr) {
+  if (withdrawn->removed && stream != nullptr) {  // it was the object's only segment
     const auto segment_id = store_->rawSegmentId({session.name, label});
     v1::IngestResponse event;
     *event.mutable_object() =
-        removedEvent(*model, 0, segment_id.ok() ? uint64_t(*segment_id) : 0);
+        removedEvent(withdrawn->model_id, 0, segment_id.ok() ? uint64_t(*segment_id) : 0);
     stream->send(std::move(event));
   }
   return absl::OkStatus();

@@ -167,7 +167,8 @@ StatusOr<bool> ObjectDatabase::removeContribution(const SegmentKey& key, int64_t
     if (keyOf(o) != key) remaining.push_back(o);
   }
   std::optional<MatchEntry> entry;
-  if (remaining.empty()) {
+  const bool emptied = remaining.empty();  // before `remaining` moves into the rebuild
+  if (emptied) {
     OBJDB_RETURN_IF_ERROR(store_->removeModel(model_id));
   } else {
     // The model frame stays where it was (the observations are expressed in it), even when
@@ -179,23 +180,19 @@ StatusOr<bool> ObjectDatabase::removeContribution(const SegmentKey& key, int64_t
   }
   segment_model_.erase(key);
   changed(model_id, std::move(entry));
-  return remaining.empty();
+  return emptied;
 }
 
-bool ObjectDatabase::holds(int64_t id) const {
-  for (const auto& [key, model] : segment_model_) {
-    if (model == id) return true;
-  }
-  return false;
-}
 
-StatusOr<int64_t> ObjectDatabase::withdrawLocked(const std::string& session, gsm::Label label) {
+StatusOr<ObjectDatabase::Withdrawal> ObjectDatabase::withdrawLocked(const std::string& session,
+                                                                    gsm::Label label) {
   const SegmentKey key{session, label};
   const auto it = segment_model_.find(key);
-  if (it == segment_model_.end()) return int64_t{0};
-  const int64_t model_id = it->second;
-  OBJDB_RETURN_IF_ERROR(removeContribution(key, model_id).status());
-  return model_id;
+  if (it == segment_model_.end()) return Withdrawal{};
+  Withdrawal withdrawal;
+  withdrawal.model_id = it->second;
+  OBJDB_ASSIGN_OR_RETURN(withdrawal.removed, removeContribution(key, withdrawal.model_id));
+  return withdrawal;
 }
 
 StatusOr<std::shared_ptr<const model::ObjectModel>> ObjectDatabase::loadModel(int64_t id) {

@@ -144,16 +144,17 @@ class ObjectDatabase {
   // the store; a pose with neither rejects the candidate (counted in scenes_missing).
   StatusOr<InsertReport> insertSegment(const std::string& session, const gsm::RawSegment& segment,
                                        const LiveScenes& live = {});
-  // Whether model `id` still holds a segment this database knows of (false once a withdrawal or
-  // a replacement emptied it and the store removed it).
-  bool holds(int64_t id) const;
-
   // Takes back segment (session, label), which the GSM withdrew (merged into another label, or
   // lost its voxels to others: gsm::Gsm::takeWithdrawn): the model that holds it is rebuilt
-  // without it, or removed when it was its only segment. Returns that model's id, 0 when the
-  // database does not hold the segment (never inserted: too small, or failed to build). The raw
-  // segment stays stored, as a record of what was extracted.
-  StatusOr<int64_t> withdrawSegment(const std::string& session, gsm::Label label);
+  // without it, or removed when it was its only segment. The raw segment stays stored, as a
+  // record of what was extracted.
+  struct Withdrawal {
+    // The model that held the segment; 0 when the database did not hold it (never inserted: too
+    // small, unusable, or failed to build).
+    int64_t model_id = 0;
+    bool removed = false;  // it was that model's only segment: the store removed the model
+  };
+  StatusOr<Withdrawal> withdrawSegment(const std::string& session, gsm::Label label);
 
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
   // `exhaustive`: the vote over every stored descriptor's exact distance (linear in their
@@ -245,7 +246,7 @@ class ObjectDatabase {
   // error (or the unusable report) is returned.
   StatusOr<InsertReport> insertLocked(const std::string& session, const gsm::RawSegment& segment,
                                       const LiveScenes& live, Prepared prepared);
-  StatusOr<int64_t> withdrawLocked(const std::string& session, gsm::Label label);
+  StatusOr<Withdrawal> withdrawLocked(const std::string& session, gsm::Label label);
   int64_t applied_seq_ = 0;
   bool measure_prefilter_ = false;
 };

@@ -47,7 +47,8 @@ StatusOr<InsertReport> ObjectDatabase::insertSegment(const std::string& session,
   return report;
 }
 
-StatusOr<int64_t> ObjectDatabase::withdrawSegment(const std::string& session, gsm::Label label) {
+StatusOr<ObjectDatabase::Withdrawal> ObjectDatabase::withdrawSegment(const std::string& session,
+                                                                     gsm::Label label) {
   OBJDB_ASSIGN_OR_RETURN(const std::unique_ptr<WriterLock> writer, beginWrite());
   auto withdrawn = withdrawLocked(session, label);
   endWrite(writer.get());

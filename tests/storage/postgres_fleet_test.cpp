@@ -141,7 +141,7 @@ TEST(PostgresFleet, ADatabaseMergesIntoTheModelAnotherServersDatabaseCreated) {
   EXPECT_EQ(s.a->modelIds().value().size(), 1u);
   // And A's database knows that B's merge holds Tuesday's segment: withdrawing it from A's
   // rebuilds the model with Monday's alone.
-  EXPECT_EQ(on_a->withdrawSegment("tuesday", 3).value(), monday->model_id);
+  EXPECT_EQ(on_a->withdrawSegment("tuesday", 3).value().model_id, monday->model_id);
   EXPECT_EQ(s.b->model(monday->model_id).value()->observations.size(), 1u);
   // A re-extraction on B of Monday's segment replaces A's contribution, no second model.
   const auto again =

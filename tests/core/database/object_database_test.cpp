@@ -335,6 +335,7 @@ TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
   auto again = f.db->insertSegment("tuesday", segment(3, b, -0.2f, 0.3f));
   ASSERT_TRUE(again.ok()) << again.status();
   EXPECT_TRUE(again->replaced_earlier);
+  EXPECT_EQ(again->removed_model, 0);  // Monday's segment kept the model
   EXPECT_TRUE(again->merged);
   ASSERT_EQ(f.store.modelIds().value().size(), 1u);
   EXPECT_EQ(f.store.model(f.store.modelIds().value()[0]).value()->observations.size(), 2u);
@@ -342,8 +343,12 @@ TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
             segment(3, b, -0.2f, 0.3f).label_voxels.size());
   // A lone segment re-extracted: its model is replaced, not duplicated.
   const World e{extinguisher(), pose(1.0, 0.5, 1.0)};
-  ASSERT_TRUE(f.db->insertSegment("monday", segment(9, e)).ok());
-  ASSERT_TRUE(f.db->insertSegment("monday", segment(9, e)).ok());
+  const auto lone = f.db->insertSegment("monday", segment(9, e));
+  ASSERT_TRUE(lone.ok()) << lone.status();
+  const auto replaced = f.db->insertSegment("monday", segment(9, e));
+  ASSERT_TRUE(replaced.ok()) << replaced.status();
+  EXPECT_EQ(replaced->removed_model, lone->model_id);  // emptied: announced as REMOVED
+  EXPECT_NE(replaced->model_id, lone->model_id);
   EXPECT_EQ(f.store.modelIds().value().size(), 2u);
 }
 
@@ -390,15 +395,17 @@ TEST(ObjectDatabase, AWithdrawnSegmentLeavesItsModel) {
   // Tuesday's label 3 was merged into another label by the GSM: its segment goes.
   auto withdrawn = f.db->withdrawSegment("tuesday", 3);
   ASSERT_TRUE(withdrawn.ok()) << withdrawn.status();
-  EXPECT_EQ(*withdrawn, first->model_id);
-  EXPECT_TRUE(f.db->holds(first->model_id));  // Monday's segment is still in it
+  EXPECT_EQ(withdrawn->model_id, first->model_id);
+  EXPECT_FALSE(withdrawn->removed);  // Monday's segment is still in it
   auto model = f.store.model(first->model_id).value();
   ASSERT_EQ(model->observations.size(), 1u);
   EXPECT_EQ(model->observations[0].session, "monday");
   // A segment the database never took: nothing to do. The last segment of a model: it goes.
-  EXPECT_EQ(f.db->withdrawSegment("tuesday", 99).value(), 0);
-  EXPECT_EQ(f.db->withdrawSegment("monday", 7).value(), first->model_id);
-  EXPECT_FALSE(f.db->holds(first->model_id));  // the server announces it as REMOVED
+  EXPECT_EQ(f.db->withdrawSegment("tuesday", 99).value().model_id, 0);
+  const auto last = f.db->withdrawSegment("monday", 7);
+  ASSERT_TRUE(last.ok()) << last.status();
+  EXPECT_EQ(last->model_id, first->model_id);
+  EXPECT_TRUE(last->removed);  // the server announces it as REMOVED
   EXPECT_TRUE(f.store.modelIds().value().empty());
   // Inserted again afterwards, it is a new model like any other.
   auto again = f.db->insertSegment("monday", segment(7, kMonday, -0.3f, 0.1f));
@@ -647,7 +654,8 @@ TEST(ObjectDatabase, TwoModelsThatBothTakeOneSegmentBecomeOne) {
     const std::string absorbed_session =
         whole.absorbed()[0] == 1 ? "monday" : "tuesday";
     const uint32_t absorbed_label = absorbed_session == "monday" ? 7 : 3;
-    EXPECT_EQ(f.db->withdrawSegment(absorbed_session, absorbed_label).value(), whole.model_id);
+    EXPECT_EQ(f.db->withdrawSegment(absorbed_session, absorbed_label).value().model_id,
+              whole.model_id);
     EXPECT_EQ(f.store.model(whole.model_id).value()->observations.size(), 2u);
   }
   {
@@ -715,7 +723,7 @@ TEST(ObjectDatabase, ASegmentWithoutSurfaceIsStoredAsUnusableNotAnError) {
   EXPECT_THAT(again->unusable_reason, HasSubstr("hold no surface"));
   EXPECT_TRUE(again->replaced_earlier);
   EXPECT_EQ(again->removed_model, first->model_id);  // it was that model's only segment
-  EXPECT_FALSE(f.db->holds(first->model_id));
+  EXPECT_EQ(f.store.model(first->model_id).status().code(), absl::StatusCode::kNotFound);
   EXPECT_EQ(again->model_id, 0);
   EXPECT_TRUE(f.store.modelIds().value().empty());
   const auto stored = f.store.rawSegment({"monday", 7});
