@@ -1,5 +1,5 @@
-// features_bench: keypoints and descriptors of one object view, measured like the peer figures in
-// ../shared/DESIGN.md (PCL 1.13 on an ~8.6k-point object view after a 1 cm voxel filter: ISS
+// features_bench: keypoints and descriptors of one object view, measured like the peer figures
+// for PCL (1.13 on an ~8.6k-point object view after a 1 cm voxel filter: ISS
 // 300 / 176 ms, Harris3D 65 / 41 ms, FPFH r = 10 cm at the keypoints 710 / 403 ms on 1 / 2
 // threads). The view is the chair model of bench/chair_model.h (its 1 cm surface cloud); every
 // figure is the median of --repeats runs.

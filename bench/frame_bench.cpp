@@ -1,4 +1,4 @@
-// The frame path on real data (issue 19's benchmark): each dataset's frames are preloaded and
+// The frame path on real data: each dataset's frames are preloaded and
 // encoded as `objdb stream` sends them, then
 //  1. offline, one frame at a time as the server's frame worker runs them: decode, filter,
 //     points, discontinuities, normals, convexity, labelling, segments (segmentation, one
@@ -11,7 +11,7 @@
 //     fast as the server takes them; acknowledged frames per second, the time from the last
 //     ack to the stream's summary (the database's backlog), the database's time per insert
 //     (GetStats), and the process's peak RSS.
-// Datasets: the folders given, else ../shared/data's SUN3D study room and desk box when present,
+// Datasets: the folders given, else local copies of the SUN3D study room and desk box if present,
 // else 100 VGA frames of the synthetic lounge's first session. Prints tables; asserts nothing
 // about time (it exits non-zero only when a stage fails).
 //

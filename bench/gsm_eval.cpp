@@ -138,7 +138,7 @@ int main(int argc, char** argv) {
                                   });
     }
     // Throughput on two cores: segmentation of frame k+1 overlaps GSM fusion of frame k
-    // (DESIGN.md, Threads). Frames are rendered beforehand so only the pipeline is timed.
+    // (docs/architecture.md, "Threads"). Frames are rendered first so only the pipeline is timed.
     std::vector<Frame> input;
     for (size_t i = 0; i < poses.size(); i += step) {
       input.push_back(sim::renderFrame(scene, built, renderer, poses[i], i, false));

@@ -1,4 +1,4 @@
-// insert_bench: issue 20's scale target — one chair-sized segment inserted into a database of N
+// insert_bench: the scale target — one chair-sized segment inserted into a database of N
 // models (N = 1,000, 3,000, 10,000, 30,000): median < 200 ms and p99 < 1 s, on SQLite and on
 // PostgreSQL. Each insert is the server's: ObjectDatabase::insertSegment (Algorithm 1: the model
 // built, the prefilter's candidates registered, verified model to model and against the scene at

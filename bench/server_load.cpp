@@ -1,4 +1,4 @@
-// server_load: RELIABILITY.md R8 at full size — N Ingest streams at once (one synthetic scene
+// server_load: concurrent load at full size — N Ingest streams at once (one synthetic scene
 // each, a different object kind on a floor) while R reader threads call GetObject / ListObjects /
 // ListSessions / GetStats until the streams are done and at least S seconds have passed, an
 // online backup taken when half the frames are
@@ -473,7 +473,7 @@ int main(int argc, char** argv) {
   }
   std::printf("\nsessions whose objects differ between the runs (points, voxels, poses, merges, cloud hash): %zu of %d\n",
               differing, streams);
-  // Exit 1 on any R8 failure: a stream or ack problem, UNKNOWN/INTERNAL/UNAVAILABLE answers, a
+  // Exit 1 on any failure: a stream or ack problem, UNKNOWN/INTERNAL/UNAVAILABLE answers, a
   // missing or damaged backup, or objects that differ from the sequential run.
   return all_ok && unknown_or_internal == 0 && unavailable == 0 && backup_ok && differing == 0 ? 0 : 1;
 }

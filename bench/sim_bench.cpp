@@ -1,5 +1,5 @@
 // Synthetic-world speed: rendering (z-buffer), noise and whole frames of the lounge at VGA and
-// Tango resolution, one thread. Target (issue 2): a VGA frame in well under 50 ms.
+// Tango resolution, one thread. Target: a VGA frame in well under 50 ms.
 #include <benchmark/benchmark.h>
 
 #include "core/sim/generator.h"

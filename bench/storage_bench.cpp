@@ -1,4 +1,4 @@
-// storage_bench: throughput of the object store (SQLite, issue 6; PostgreSQL, issue 20) on
+// storage_bench: throughput of the object store (SQLite and PostgreSQL) on
 // realistic models — a
 // chair-sized TSDF at 1 cm (seat, back, four legs; observed band ±3 voxels), its surface cloud,
 // ISS ∪ Harris3D keypoints and FPFH descriptors built by core/model exactly as the database does.

@@ -1,5 +1,5 @@
-// TSDF integration speed on the synthetic lounge, measured like the peer figures in
-// ../shared/DESIGN.md (VGA depth, 100 frames, truncation 4 cm): ms per frame at 2 cm and 1 cm
+// TSDF integration speed on the synthetic lounge, measured like the Open3D peer
+// figures it prints (VGA depth, 100 frames, truncation 4 cm): ms per frame at 2 cm and 1 cm
 // voxels, one thread and two, plus allocated blocks and bytes per voxel.
 //   tsdf_bench [--frames N]
 #include <malloc.h>
@@ -62,7 +62,7 @@ int main(int argc, char** argv) {
                   ms / frames, layer.numBlocks(), sizeof(tsdf::TsdfVoxel));
     }
   }
-  std::printf("\nPeers on these machines (DESIGN.md): Open3D VoxelBlockGrid 2 cm 13.7 / 7.7 ms "
+  std::printf("\nPeers on these machines: Open3D VoxelBlockGrid 2 cm 13.7 / 7.7 ms "
               "(1 / 2 threads), 1 cm 42 / 22.8 ms; ScalableTSDFVolume 2 cm 14.1 / 11.6 ms.\n");
   return 0;
 }

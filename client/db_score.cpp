@@ -176,7 +176,7 @@ void printTruthScore(const TruthScore& s) {
                        : absl::StrFormat("%.0f %% (%d of %d)",
                                          100.0 * double(s.with_kind) / double(s.repeated),
                                          s.with_kind, s.repeated));
-  // models: how many models the kind ends in over all sessions (issue 18: at most 2 for a
+  // models: how many models the kind ends in over all sessions (the target: at most 2 for a
   // chair kind); models/object: how many models hold each object's segments, on average.
   std::printf("\n%-22s %8s %10s %8s %14s\n", "kind", "objects", "segments", "models",
               "models/object");

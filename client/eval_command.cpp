@@ -1,4 +1,4 @@
-// `objdb eval`: the evaluation of issue 17 on the server's own protocol. Starts objdb-server in
+// `objdb eval`: the database's evaluation on the server's own protocol. Starts objdb-server in
 // this process on a new database, streams the datasets through it exactly as `objdb stream` does
 // (one session each, online inserts, the live scene check, per-extraction replacement), ends the
 // sessions, and scores what the database holds: against ground truth where every dataset has it

@@ -1,4 +1,4 @@
-// `objdb eval`'s completion score (issue 18, deliverable 4), on the server's own answers: every
+// `objdb eval`'s completion score, on the server's own answers: every
 // session's scene mesh as GetSceneMesh serves it, raw and completed by the merged models. It
 // reports the surface completion added and three checks of it:
 //   - the session's own frames: an added point in front of a measured depth was seen through (the

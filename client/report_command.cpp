@@ -1,5 +1,5 @@
-// `objdb report merges`: a picture sheet of the database's merges, for data without ground truth
-// (issue 17). Every model built from two or more segments gets one row: its evidence (surface
+// `objdb report merges`: a picture sheet of the database's merges, for data without ground truth.
+// Every model built from two or more segments gets one row: its evidence (surface
 // kind, extent, each merge's e_ICP, e_TSDF, o_TSDF and scene checks), its surface cloud, and each
 // of its placements drawn over the camera image of the frame that sees it best (most model points
 // projecting onto pixels whose measured depth agrees), the rest of the image dimmed. This is how a

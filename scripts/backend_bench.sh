@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The lounge through one objdb-server on SQLite and on PostgreSQL, in one run (issue 20's
+# The lounge through one objdb-server on SQLite and on PostgreSQL, in one run (the
 # overhead target: PostgreSQL within 1.5x of SQLite). Both are durable: SQLite synchronous=FULL
 # (the default), PostgreSQL fsync, full_page_writes and synchronous_commit on, on a throwaway
 # cluster (scripts/pg_test_cluster.sh) in /tmp. Prints the wall time of `objdb stream` (every

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Fuzzes the decoders that read outside bytes (RELIABILITY.md R6) with libFuzzer under ASan and
+# Fuzzes the decoders that read outside bytes (docs/fuzzing.md) with libFuzzer under ASan and
 # UBSan, then minimises the corpus into tests/fuzz/corpus/TARGET (committed; corpus_replay_test
 # replays it on every test run). Not part of CI: it takes SECONDS per target (default 600).
 #   scripts/fuzz.sh [SECONDS] [TARGET...]      TARGET: frame blob config (default all)

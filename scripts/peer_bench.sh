@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# Peer benchmarks (issue 19): builds objdb with -DOBJDB_BUILD_PEERS=ON and runs our TSDF
+# Peer benchmarks: builds objdb with -DOBJDB_BUILD_PEERS=ON and runs our TSDF
 # integration and registration against Open3D's and PCL's on the same inputs, in one run.
 # Installs Debian's libopen3d-dev when it is missing (root or sudo; not part of the main build,
-# which never needs Open3D). Run from anywhere; the benchmarks read ../shared/data when present.
+# which never needs Open3D). Run from anywhere; the benchmarks use a real TUM-layout sequence
+# (e.g. SUN3D) when one is present.
 # Usage: scripts/peer_bench.sh [--repeats R] (passed to every peer benchmark)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# RELIABILITY.md R8's reduced run under ThreadSanitizer: builds the concurrency tests in
+# Races under ThreadSanitizer, on a reduced concurrent load: builds the concurrency tests in
 # build-tsan (GCC, -fsanitize=thread) and runs them; a failing test or a race report in our code
 # fails the script. Not part of CI: a first build takes ~10 min on two cores, and the database's
 # PCL work runs 30-100x slower instrumented, so object_database_service_test takes over an hour
-# (its reduced R8 test fails its stretched deadlines under TSan; docs/server.md, "Races").
+# (its reduced concurrency test fails its stretched deadlines under TSan; docs/server.md, "Races").
 #   scripts/tsan.sh [gtest filter]     default: every test of the three binaries
 # Only our code is instrumented. Debian's gRPC, protobuf, abseil and libgomp are not, so TSan
 # reports thousands of races it cannot see the synchronisation of; scripts/tsan_triage.py sorts

@@ -1,4 +1,4 @@
-// Who may call the server (RELIABILITY.md R11): an optional bearer token and optional TLS
+// Who may call the server (docs/server.md): an optional bearer token and optional TLS
 // (server certificate; with a client CA, mutual TLS). Shared by the server (credentials, the
 // token check every objdb.v1.ObjectDatabase handler runs first) and the client (channel
 // credentials, the token attached to every call).

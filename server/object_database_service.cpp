@@ -235,6 +235,7 @@ Status ObjectDatabaseService::checkSessionLimit() {
     std::lock_guard live_lock(live->mutex);
     open += live->state != v1::SESSION_STATE_ENDED ? 1 : 0;
   }
+  open += opening_;  // headers between their check and their publication
   if (open < options_.max_open_sessions) return absl::OkStatus();
   return absl::ResourceExhaustedError(absl::StrFormat(
       "too many sessions with a map in memory (%d): end some with EndSession, or start the "
@@ -264,19 +265,36 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
   OBJDB_RETURN_IF_ERROR(startPipeline(*session, options_.integration_threads));
   OBJDB_RETURN_IF_ERROR(leaseNewSession(session->name));
 
-  std::unique_lock lock(mutex_);
-  Status opened = stopped_ ? absl::UnavailableError("the server is shutting down")
-                           : checkSessionLimit();
+  {
+    // A place under the session limit is taken before the store is written, and the store is
+    // written outside the service mutex (the query and callback threads take it too).
+    std::unique_lock lock(mutex_);
+    Status reserved = stopped_ ? absl::UnavailableError("the server is shutting down")
+                               : checkSessionLimit();
+    if (!reserved.ok()) {
+      lock.unlock();
+      releaseLease(session->name);
+      return reserved;
+    }
+    ++opening_;
+  }
   storage::SessionInfo info;
   info.name = session->name;
   info.intrinsics_json = storage::intrinsicsJson(session->intrinsics);
   info.params_json = paramsToJson(session->params);
   // ALREADY_EXISTS when the database has a session of that name.
-  if (opened.ok()) opened = store_->beginSession(info).status();
-  if (!opened.ok()) {
+  const Status begun = store_->beginSession(info).status();
+  std::unique_lock lock(mutex_);
+  --opening_;
+  if (!begun.ok() || stopped_) {
     lock.unlock();
+    if (begun.ok()) {
+      // Stored as open while the server began to stop, whose sweep of unended sessions did not
+      // see it: it ends as interrupted now, with nothing integrated.
+      (void)store_->finishSession(session->name, storage::SessionState::kInterrupted, 0);
+    }
     releaseLease(session->name);
-    return opened;
+    return begun.ok() ? absl::UnavailableError("the server is shutting down") : begun;
   }
   session->started_unix_s = nowUnixSeconds();
   session->stream = stream;  // before it is published: EndSession looks at the stream
@@ -464,10 +482,27 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
     std::lock_guard lock(session.mutex);
     session.scene.reset();
   }
+  session.frame_indices = {};
   logger("server")->info("session {} ended: {} frames, {} segments flushed at the end",
                          session.name, frames, flushed);
   releaseLease(session.name);
+  forgetEndedSessions();
   return absl::OkStatus();
+}
+
+void ObjectDatabaseService::forgetEndedSessions() {
+  std::lock_guard lock(mutex_);
+  std::vector<std::pair<double, std::string>> ended;  // (ended at, name)
+  for (const auto& [name, session] : sessions_) {
+    std::lock_guard session_lock(session->mutex);
+    if (session->state == v1::SESSION_STATE_ENDED && !session->streaming) {
+      ended.emplace_back(session->ended_unix_s, name);
+    }
+  }
+  const size_t kept = options_.ended_sessions_kept;
+  if (ended.size() <= kept) return;
+  std::sort(ended.begin(), ended.end());
+  for (size_t i = 0; i + kept < ended.size(); ++i) sessions_.erase(ended[i].second);
 }
 
 grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* ObjectDatabaseService::Ingest(

@@ -1,4 +1,4 @@
-// objdb.v1.ObjectDatabase (DESIGN.md "Data flow", "Threads"): the server's sessions and the
+// objdb.v1.ObjectDatabase (docs/architecture.md: data flow, threads): the server's sessions and the
 // queries over its database. The frame pipeline itself is server/session/live_session.h, the
 // Ingest call's reactor server/ingest_stream.h; this class owns the sessions, the database thread
 // and the RPC handlers (queries in queries.cpp, a stream's pipeline in session_stream.cpp,
@@ -59,6 +59,7 @@ struct ServiceOptions {
   Params params;                    // the server's parameters; sessions may override some
   size_t frame_queue = 8;           // frames buffered per stream before reading pauses
   size_t max_open_sessions = 16;    // sessions with a map in memory; more: RESOURCE_EXHAUSTED
+  size_t ended_sessions_kept = 64;  // ServerOptions::ended_sessions_kept
   // A session whose stream closed or broke and that gets no EndSession for this long is ended by
   // the server (map stored, segments inserted). 0 = never.
   std::chrono::milliseconds auto_end_after{10 * 60 * 1000};
@@ -148,6 +149,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
                                                      const std::shared_ptr<IngestStream>& stream);
   // RESOURCE_EXHAUSTED when max_open_sessions sessions are not ended (mutex_ held).
   Status checkSessionLimit();
+  // Ended sessions stay in memory, counters and all, for a repeated EndSession and for
+  // ListSessions; beyond the options_.ended_sessions_kept most recently ended, the oldest are
+  // dropped (the store answers for them, with the counters it keeps: frames and objects).
+  void forgetEndedSessions();
   void startWorker(std::function<void()> work);
   // Runs `work` (which fills the call's response) on the query pool and finishes the call with
   // its status; a full or stopped pool answers at once.
@@ -236,6 +241,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   };
   std::list<Worker> workers_;
   bool stopped_ = false;
+  size_t opening_ = 0;  // sessions between their limit check and their publication
 
   std::atomic<uint64_t> jobs_cancelled_{0};
   std::atomic<uint64_t> candidates_skipped_{0};

@@ -17,6 +17,26 @@
 namespace objdb::server {
 namespace {
 
+// NOT_FOUND for an id that is no object now, saying what became of it: a removed model's
+// segment went to its successor, which may have merged on since (the chain is followed).
+Status noObject(const storage::Store& store, int64_t id) {
+  OBJDB_ASSIGN_OR_RETURN(const storage::ModelFate fate, store.modelFate(id));
+  if (fate.state != "removed") return absl::NotFoundError(absl::StrFormat("no object %d", id));
+  int64_t next = fate.next;
+  for (int hop = 0; next > 0 && hop < 1000; ++hop) {
+    OBJDB_ASSIGN_OR_RETURN(const storage::ModelFate now, store.modelFate(next));
+    if (now.state == "active") {
+      return absl::NotFoundError(absl::StrFormat(
+          "object %d was removed; its segment is in object %d now", id, next));
+    }
+    next = now.next;
+  }
+  return absl::NotFoundError(absl::StrFormat(
+      "object %d was removed; no object holds its segment now (it was withdrawn: its GSM label "
+      "joined another, whose segment carries its surface; or it holds no surface any more)",
+      id));
+}
+
 // The parts of `summary` at each of its poses, from the raw segments' voxels (in pose order, then
 // by label); with `voxels`, each part's voxel centres too. A pose whose segment row is gone, or
 // that was stored before parts had geometry, gives none.
@@ -199,9 +219,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
     query.include_merged = true;
     OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::ModelSummary> found,
                            store_->modelSummaries(query));
-    if (found.empty() || found.front().id != id) {
-      return absl::NotFoundError(absl::StrFormat("no object %d", request->id()));
-    }
+    if (found.empty() || found.front().id != id) return noObject(*store_, id);
     const storage::ModelSummary& summary = found.front();
     toProto(summary, response->mutable_summary());
     v1::ObjectStats& stats = *response->mutable_stats();

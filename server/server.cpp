@@ -43,6 +43,10 @@ Status ServerOptions::validate() const {
                         static_cast<int64_t>(drain_deadline.count()),
                         static_cast<int64_t>(kMaxDrainDeadline.count())));
   }
+  if (ended_sessions_kept < 0 || ended_sessions_kept > 100000) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "ended_sessions_kept is %d, must be in [0, 100000]", ended_sessions_kept));
+  }
   if (max_open_sessions < 1 || max_open_sessions > kMaxOpenSessions) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "max_open_sessions is %d, must be in [1, %d]", max_open_sessions, kMaxOpenSessions));
@@ -110,6 +114,7 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   service_options.frame_queue = size_t(options.frame_queue);
   service_options.segment_queue = size_t(options.segment_queue);
   service_options.max_open_sessions = size_t(options.max_open_sessions);
+  service_options.ended_sessions_kept = size_t(options.ended_sessions_kept);
   service_options.query_threads = options.query_threads;
   service_options.query_queue = size_t(options.query_queue);
   service_options.auto_end_after = options.auto_end_after;

@@ -67,6 +67,10 @@ struct ServerOptions {
   // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a
   // room at 2 cm). One more Ingest is refused with RESOURCE_EXHAUSTED.
   int max_open_sessions = 16;
+  // Ended sessions kept in memory with all their counters (for a repeated EndSession and for
+  // ListSessions); the oldest beyond this many are dropped, and the store answers for them (its
+  // counters: frames and objects). 0..100000.
+  int ended_sessions_kept = 64;
   // Queries run on a pool of their own (server/query_pool.h), off gRPC's threads: its threads
   // and the calls that may wait for one; more are refused with RESOURCE_EXHAUSTED.
   int query_threads = 4;

@@ -1,4 +1,4 @@
-// Ending the sessions a stopped server left open (RELIABILITY.md R2): at start, this server's
+// Ending the sessions a stopped server left open (docs/server.md): at start, this server's
 // own from before; later, those of another server on the same database whose lease expired.
 // Each open session is marked interrupted; one with a saved map is ended from it on the database
 // thread (its segments inserted, its scene stored), while the server already serves. The lease

@@ -1,4 +1,4 @@
-// Blob codec of the SQLite store (issue 6): every binary column is a self-describing blob —
+// Blob codec of the SQLite store: every binary column is a self-describing blob —
 // a 32-byte header {magic "ODBB", format version, kind, codec, payload sizes, CRC32 of the
 // stored payload} followed by the payload, raw or zstd-compressed. Decoding checks the magic,
 // version, kind, sizes (before any allocation) and checksum, and decompresses in steps (memory

@@ -103,6 +103,14 @@ struct ModelSummary {
   int64_t merges = 0;              // merge records with this model as target
 };
 
+// What became of a model id (Store::modelFate).
+struct ModelFate {
+  std::string state;  // "active", "merged", "removed"; empty: no model ever had this id
+  // merged: the model that absorbed it; removed: the model that holds its segment now (0:
+  // none, or not recorded: the segment was withdrawn, or holds no surface any more).
+  int64_t next = 0;
+};
+
 // Which models modelSummaries() returns: ids above after_id, ascending, at most `limit`.
 struct ModelQuery {
   int64_t after_id = 0;
@@ -138,6 +146,7 @@ class Store : public database::ModelStore {
 
   // Model rows without blobs (see ModelQuery), one snapshot.
   virtual StatusOr<std::vector<ModelSummary>> modelSummaries(const ModelQuery& query) const = 0;
+  virtual StatusOr<ModelFate> modelFate(int64_t id) const = 0;
   // The id of a stored raw segment (NOT_FOUND when none has that key).
   virtual StatusOr<int64_t> rawSegmentId(const database::SegmentKey& key) const = 0;
 

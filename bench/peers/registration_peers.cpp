@@ -1,4 +1,4 @@
-// Registration against PCL 1.13 and Open3D 0.16 in one run (issue 19): the coarse-to-fine step
+// Registration against PCL 1.13 and Open3D 0.16 in one run: the coarse-to-fine step
 // of the database (paper §III-C.3) on object pairs whose right answer is known. Every system gets
 // the same input: the two models' surface clouds with normals, their ISS ∪ Harris3D keypoints and
 // FPFH descriptors (computed once by core/model), and returns T_target_source.

@@ -1,4 +1,4 @@
-// TSDF integration against Open3D 0.16 in one run (issue 19): ours, Open3D's tensor
+// TSDF integration against Open3D 0.16 in one run: ours, Open3D's tensor
 // VoxelBlockGrid and its legacy ScalableTSDFVolume fuse the same preloaded VGA depth frames at
 // 2 cm and 1 cm voxels, 1 and 2 threads, truncation 4 cm, depth ≤ 4 m. Cells are run `repeats`
 // times, interleaved (ours, VoxelBlockGrid, Scalable, next cell, ...), and the median of the

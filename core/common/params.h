@@ -1,5 +1,5 @@
 // Parameter structs of every pipeline stage, with the paper's defaults (table I) and the
-// reference implementations' defaults where the paper is silent (DESIGN.md). One struct per
+// reference implementations' defaults where the paper is silent (voxblox, PCL). One struct per
 // configurable thing; each has validate() naming the bad field. `Params` bundles them; config
 // files (JSON) map onto it in params_io.h, nowhere else.
 #pragma once
@@ -67,7 +67,7 @@ struct GsmParams {
   // recall 55 of 92 (was 53 of 90), 0 erroneous merges, completion precision 28 % → 38 %.
   float merge_min_joint_share = 0.5f;
   int extraction_age_frames = 10;        // a label untouched this long is extracted
-  // Whole objects (ours, issue 18; core/gsm/objects.h): above the convex labels, the labels that
+  // Whole objects (ours; core/gsm/objects.h): above the convex labels, the labels that
   // touch (voxels within object_gap_m) are grouped into objects, except across room structure
   // (a planar label at least object_structure_extent_m wide along both in-plane axes) and
   // across a support (a label resting on the face of a planar label that surrounds the contact
@@ -118,7 +118,7 @@ struct ModelParams {
   float noise_sigma0_m = 0.0012f;
   float noise_sigma2_m = 0.0019f;
   float noise_z0_m = 0.4f;
-  // Room structure (ours, issue 17): a segment is structure (stored, listed as such, never matched
+  // Room structure (ours): a segment is structure (stored, listed as such, never matched
   // or merged) when one of its first structure_max_planes RANSAC planes (at the same distance)
   // holds at least structure_min_share of its points and spans at least structure_min_extent_m
   // along both of its in-plane axes (5th to 95th percentile of its inliers): a flat face bigger

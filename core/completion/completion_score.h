@@ -1,6 +1,6 @@
 // Scores of a scene completion (evaluation only: `objdb eval` and bench/database_eval): what it
 // added, whether the session's own frames contradict it, and, with ground truth, how much of the
-// true surface of repeated objects it recovered (issue 18, deliverable 4).
+// true surface of repeated objects it recovered.
 #pragma once
 
 #include <cstddef>

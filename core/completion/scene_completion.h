@@ -1,4 +1,4 @@
-// Scene completion (paper §III-C, last step; issue 5 deliverable 4): the merged object models are
+// Scene completion (paper §III-C, last step): the merged object models are
 // placed at each pose where a session observed them; where a placed model verifies against the
 // session's scene TSDF (the same e_TSDF / o_TSDF test as merging), its voxels around its own
 // surface voxels (MergingParams::completion_margin_voxels) fill what the scene did not observe:

@@ -1,6 +1,6 @@
 // What the object database needs from storage (paper §III-C, Algorithm 1's Ω): raw segments
 // keyed by (session, GSM label), object models, merge records and the scene map of each session
-// (for model-to-scene verification). Every mutating call is one unit — the SQLite store (issue 6)
+// (for model-to-scene verification). Every mutating call is one unit — the SQLite store
 // makes each a transaction. InMemoryModelStore serves tests and offline benchmarks.
 #pragma once
 
@@ -122,6 +122,15 @@ class ModelStore {
   virtual Status absorbModel(model::ObjectModel target, const MergeRecord& merge,
                              int64_t absorbed) = 0;
   virtual Status removeModel(int64_t id) = 0;
+  // Where the segment of the removed model `removed` went: the model `successor` holds it now (a
+  // re-extracted segment that emptied its old model). Kept where the store keeps lineage (the
+  // tombstone's merged_into), so that a query of the removed id can say where to look; this
+  // default keeps nothing.
+  virtual Status setSuccessor(int64_t removed, int64_t successor) {
+    (void)removed;
+    (void)successor;
+    return Status();
+  }
   virtual StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const = 0;
   // Ids of the stored (active) models, ascending.
   virtual StatusOr<std::vector<int64_t>> modelIds() const = 0;

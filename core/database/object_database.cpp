@@ -716,6 +716,17 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
       OBJDB_RETURN_IF_ERROR(absorbCoAccepted(std::move(kept), *best, loaded, live, &report));
     }
   }
+  if (report.removed_model != 0) {
+    // The tombstone of the model the segment's earlier version emptied names where it went. The
+    // insert itself is committed: a failure here costs that pointer only.
+    if (const Status noted = store_->setSuccessor(report.removed_model, report.model_id);
+        !noted.ok()) {
+      logger("database")->warn("object {} was removed for segment {}/{}, which is in object {} "
+                               "now; recording that failed: {}",
+                               report.removed_model, session, segment.label, report.model_id,
+                               noted.ToString());
+    }
+  }
   report.timings.store_ms = msSince(t_store);
   report.timings.writer_hold_ms = msSince(locked);
   return report;

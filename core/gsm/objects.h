@@ -1,4 +1,4 @@
-// Object hypotheses above the GSM's convex labels (ours, issue 18). The segmenter cuts frames
+// Object hypotheses above the GSM's convex labels (ours). The segmenter cuts frames
 // into convex parts (paper §III-A), so a chair is a seat, a back and legs. Here the labels of a
 // map are grouped into objects: two labels connect when their voxels touch (within
 // GsmParams::object_gap_m, at least object_min_contact_voxels voxels of the two next to the

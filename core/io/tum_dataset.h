@@ -1,7 +1,7 @@
 // The TUM RGB-D layout: depth.txt / rgb.txt ("timestamp path" lines, '#' comments),
 // groundtruth.txt ("timestamp tx ty tz qx qy qz qw", T_world_camera), 16-bit depth PNGs with
 // 5000 units per metre. Intrinsics come from an intrinsics.json beside them
-// ({"width","height","fx","fy","cx","cy","depth_factor"}, as in ../shared/data) or from
+// ({"width","height","fx","fy","cx","cy","depth_factor"}, docs/dataset-format.md) or from
 // DatasetOptions. Each depth frame is associated with the ground-truth pose and the colour image
 // nearest in time (within DatasetOptions::max_time_difference_s); depth frames without a pose
 // are skipped and counted (framesWithoutPose()).

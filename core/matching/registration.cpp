@@ -1,5 +1,5 @@
 // The only translation unit of core/matching that includes PCL (registration headers are the
-// heaviest: see DESIGN.md).
+// heaviest: ~30 s and 1.5 GB to compile).
 #include "core/matching/registration.h"
 
 #include <algorithm>

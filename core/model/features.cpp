@@ -1,4 +1,4 @@
-// The only translation unit of core/model that includes PCL (compile cost: see DESIGN.md).
+// The only translation unit of core/model that includes PCL (its headers are slow to compile).
 #include "core/model/features.h"
 
 #include <algorithm>

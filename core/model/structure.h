@@ -1,5 +1,5 @@
 // Room structure and planarity of a segment's surface (paper §III-C.1's planarity test, made
-// noise-aware; room structure is ours, issue 17). The distance a point may lie off a plane
+// noise-aware; room structure is ours). The distance a point may lie off a plane
 // follows the sensor's axial noise at the depth the segment was seen from
 // (ModelParams::planeDistance). A segment is planar when one plane holds most of its points;
 // it is structure when a plane bigger than an object can be (both in-plane spans at least

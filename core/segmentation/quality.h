@@ -1,4 +1,4 @@
-// Segmentation quality against ground-truth instance masks (issue 3 targets): coverage (IoU of
+// Segmentation quality against ground-truth instance masks: coverage (IoU of
 // each object's best segment, weighted by object size), under-segmentation (segments spanning
 // two or more instances) and over-segmentation (segments per object). Also, for composite objects
 // that a geometric segmenter cuts into parts on purpose (a chair's seat, back and legs): union

@@ -1,4 +1,4 @@
-// One session's frame pipeline (DESIGN.md "Data flow", steps 1-4; paper §III-A, §III-B): a frame
+// One session's frame pipeline (docs/architecture.md, data flow steps 1-4; paper §III-A, §III-B): a frame
 // is validated and decoded, segmented, and fused into the session's Global Segmentation Map;
 // idle segments are extracted as database jobs, each carrying a snapshot of the map as it was at
 // extraction, so that the database can verify a merge against this live scene (paper §III-C.4,

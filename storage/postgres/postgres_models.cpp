@@ -188,6 +188,43 @@ Status PostgresStore::removeModel(int64_t id) {
                       [&](const pg::Connection& c) { return retireModel(c, id, 0); });
 }
 
+Status PostgresStore::setSuccessor(int64_t removed, int64_t successor) {
+  return impl_->write(
+      absl::StrFormat("recording where removed object model %d went", removed),
+      [&](const pg::Connection& c) {
+        Params p;
+        if (successor > 0) {
+          p.add(successor);
+        } else {
+          p.null();
+        }
+        p.add(removed);
+        return c.exec("UPDATE models SET merged_into = $1::bigint WHERE id = $2 AND "
+                      "state = 'removed'",
+                      p, "recording the successor")
+            .status();
+      });
+}
+
+StatusOr<ModelFate> PostgresStore::modelFate(int64_t id) const {
+  ModelFate fate;
+  const std::string context = absl::StrFormat("reading the state of object model %d", id);
+  OBJDB_RETURN_IF_ERROR(impl_->read(context, [&](const pg::Connection& c) -> Status {
+    fate = ModelFate{};
+    Params p;
+    p.add(id);
+    OBJDB_ASSIGN_OR_RETURN(
+        Result r, c.exec("SELECT state, COALESCE(merged_into, 0) FROM models WHERE id = $1", p,
+                         context));
+    if (r.rows() > 0) {
+      fate.state = r.text(0, 0);
+      fate.next = r.integer(0, 1);
+    }
+    return absl::OkStatus();
+  }));
+  return fate;
+}
+
 StatusOr<std::shared_ptr<const model::ObjectModel>> PostgresStore::model(int64_t id) const {
   std::optional<model::ObjectModel> out;
   const std::string context = absl::StrFormat("reading object model %d", id);

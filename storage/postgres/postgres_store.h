@@ -77,6 +77,7 @@ class PostgresStore : public Store {
   Status absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
                      int64_t absorbed) override;
   Status removeModel(int64_t id) override;
+  Status setSuccessor(int64_t removed, int64_t successor) override;
   StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
   StatusOr<std::vector<int64_t>> modelIds() const override;
   StatusOr<database::MatchEntries> matchEntries() const override;
@@ -96,6 +97,7 @@ class PostgresStore : public Store {
   StatusOr<int64_t> savedMapFrames(const std::string& session) const override;
   Status dropSavedMap(const std::string& session) override;
   StatusOr<std::vector<ModelSummary>> modelSummaries(const ModelQuery& query) const override;
+  StatusOr<ModelFate> modelFate(int64_t id) const override;
   StatusOr<int64_t> rawSegmentId(const database::SegmentKey& key) const override;
   StatusOr<SessionInfo> beginSession(const SessionInfo& info) override;
   Status finishSession(const std::string& name, SessionState state, int64_t frames) override;

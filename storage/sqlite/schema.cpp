@@ -6,7 +6,7 @@
 namespace objdb::storage {
 namespace {
 
-// Version 1: the data model of DESIGN.md. Times are ISO-8601 UTC text; binary columns are
+// Version 1: the first data model. Times are ISO-8601 UTC text; binary columns are
 // blobs of storage/blob_codec.h. Ids are AUTOINCREMENT so that no id is ever reused.
 constexpr const char* kSchemaV1 = R"sql(
 CREATE TABLE sessions (
@@ -131,19 +131,19 @@ CREATE TABLE saved_label_blocks (
 );
 )sql";
 
-// Room structure (issue 17): a model's flag, and the depth each raw segment was seen from (the
+// Room structure: a model's flag, and the depth each raw segment was seen from (the
 // noise its planarity and structure tests use).
 constexpr const char* kSchemaV3 = R"sql(
 ALTER TABLE models ADD COLUMN structure INTEGER NOT NULL DEFAULT 0;
 ALTER TABLE raw_segments ADD COLUMN observation_depth_m REAL NOT NULL DEFAULT 0;
 )sql";
 
-// Whole objects (issue 18): the GSM labels a raw segment is made of, comma-separated.
+// Whole objects: the GSM labels a raw segment is made of, comma-separated.
 constexpr const char* kSchemaV4 = R"sql(
 ALTER TABLE raw_segments ADD COLUMN parts TEXT NOT NULL DEFAULT '';
 )sql";
 
-// Parts with geometry (issue 18): the part (GSM label) of each of a raw segment's voxels, as an
+// Parts with geometry: the part (GSM label) of each of a raw segment's voxels, as an
 // index blob aligned with raw_segments.voxels; NULL when not recorded.
 constexpr const char* kSchemaV5 = R"sql(
 ALTER TABLE raw_segments ADD COLUMN voxel_parts BLOB;

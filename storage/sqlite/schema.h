@@ -1,4 +1,4 @@
-// The store's schema and its forward migrations (issue 6). A database file carries SQLite's
+// The store's schema and its forward migrations. A database file carries SQLite's
 // `application_id` (objdb's id) and `user_version` (the schema version). Opening checks both
 // before writing anything: a file that is not SQLite, another application's database or a
 // newer schema is refused, untouched; an older schema is migrated in one transaction per step

@@ -197,6 +197,35 @@ Status SqliteStore::removeModel(int64_t id) {
   return body();
 }
 
+Status SqliteStore::setSuccessor(int64_t removed, int64_t successor) {
+  std::lock_guard lock(write_mutex_);
+  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*writer_,
+                                                         "UPDATE models SET merged_into = ? "
+                                                         "WHERE id = ? AND state = 'removed'"));
+  if (successor > 0) {
+    s.bind(1, successor);
+  } else {
+    s.bindNull(1);
+  }
+  return s.bind(2, removed).run();
+}
+
+StatusOr<ModelFate> SqliteStore::modelFate(int64_t id) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s,
+      Statement::prepare(*lease, "SELECT state, COALESCE(merged_into, 0) FROM models WHERE id = ?"));
+  s.bind(1, id);
+  OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+  ModelFate fate;
+  if (row) {
+    fate.state = s.columnText(0);
+    fate.next = s.columnInt(1);
+  }
+  return fate;
+}
+
 StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t id) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));

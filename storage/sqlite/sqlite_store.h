@@ -1,4 +1,4 @@
-// The embedded backend of storage::Store (storage/store.h; DESIGN.md "Persistence"): one SQLite
+// The embedded backend of storage::Store (storage/store.h; docs/storage.md): one SQLite
 // file in WAL mode. One writer connection (every mutation one BEGIN IMMEDIATE transaction), a pool
 // of reader connections (every read one snapshot), binary data in checksummed, versioned,
 // compressed blobs (storage/blob_codec.h). A damaged blob fails only the row that holds it, with
@@ -74,6 +74,7 @@ class SqliteStore : public Store {
   Status absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
                      int64_t absorbed) override;
   Status removeModel(int64_t id) override;
+  Status setSuccessor(int64_t removed, int64_t successor) override;
   StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
   StatusOr<std::vector<int64_t>> modelIds() const override;
   StatusOr<database::MatchEntries> matchEntries() const override;
@@ -93,6 +94,7 @@ class SqliteStore : public Store {
   StatusOr<int64_t> savedMapFrames(const std::string& session) const override;
   Status dropSavedMap(const std::string& session) override;
   StatusOr<std::vector<ModelSummary>> modelSummaries(const ModelQuery& query) const override;
+  StatusOr<ModelFate> modelFate(int64_t id) const override;
   StatusOr<int64_t> rawSegmentId(const database::SegmentKey& key) const override;
   StatusOr<SessionInfo> beginSession(const SessionInfo& info) override;
   Status finishSession(const std::string& name, SessionState state, int64_t frames) override;

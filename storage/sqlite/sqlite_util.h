@@ -1,6 +1,6 @@
 // Thin RAII over the SQLite C API for the store: a connection, prepared statements with bound
 // values, a write transaction (BEGIN IMMEDIATE) and a read snapshot (BEGIN DEFERRED), and the
-// one mapping from SQLite result codes to Status codes (RELIABILITY.md: BUSY/IOERR →
+// one mapping from SQLite result codes to Status codes (BUSY/IOERR →
 // UNAVAILABLE, FULL → RESOURCE_EXHAUSTED, CORRUPT/NOTADB → DATA_LOSS).
 #pragma once
 

@@ -1,4 +1,4 @@
-// Fuzz targets (RELIABILITY.md R6): the decoders that read bytes from outside the process.
+// Fuzz targets (docs/fuzzing.md): the decoders that read bytes from outside the process.
 // Each takes arbitrary bytes and must end in OK or a Status — never crash, hang, leak or read out
 // of bounds. libFuzzer drives them under ASan/UBSan (scripts/fuzz.sh, tests/fuzz/fuzz_main.cpp);
 // corpus_replay_test replays the committed corpus (tests/fuzz/corpus/TARGET/) on every test run.

@@ -1,4 +1,4 @@
-// Authentication and transport security (RELIABILITY.md R11): token files, the bearer check, the
+// Authentication and transport security: token files, the bearer check, the
 // listen policy, and over loopback: every objdb.v1.ObjectDatabase method (enumerated from the
 // service descriptor, so a new RPC cannot skip the check) refuses a missing or wrong token;
 // health stays open; TLS refuses plaintext clients and clients trusting another CA; mutual TLS

@@ -1,4 +1,4 @@
-// Several objdb-server processes on one PostgreSQL database (issue 20): server B runs throughout;
+// Several objdb-server processes on one PostgreSQL database: server B runs throughout;
 // in each of 20 trials a server A starts, A and B each take a stream at the same time, and A is
 // SIGKILLed while its stream runs (after a random number of acks) or after its EndSession
 // answered. B must take A's interrupted session over once A's lease expires (end it from its

@@ -18,6 +18,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "core/common/params.h"
 #include "core/common/params_io.h"
 #include "core/database/object_database.h"
@@ -182,6 +183,63 @@ TEST(ObjectDatabaseService, AnEmptyDatabaseAnswersEveryQuery) {
     EXPECT_FALSE(reader->Read(&chunk));
     EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
   }
+}
+
+// A removed object's id answers NOT_FOUND saying where its segment went: to an active object,
+// through an object that merged on since, or nowhere.
+TEST(ObjectDatabaseService, GetObjectOfARemovedObjectSaysWhereItsSegmentWent) {
+  const std::string db_path = scratchDbPath();
+  int64_t to_active = 0, to_merged = 0, nowhere = 0, target = 0, absorbed = 0;
+  {
+    auto store = storage::SqliteStore::open(db_path).value();
+    to_active = store->addModel(objdb::testing::makeStoreModel(1, 1)).value();
+    target = store->addModel(objdb::testing::makeStoreModel(2, 1)).value();
+    absorbed = store->addModel(objdb::testing::makeStoreModel(3, 1)).value();
+    to_merged = store->addModel(objdb::testing::makeStoreModel(4, 1)).value();
+    nowhere = store->addModel(objdb::testing::makeStoreModel(5, 1)).value();
+    ASSERT_TRUE(store->removeModel(to_active).ok());
+    ASSERT_TRUE(store->setSuccessor(to_active, target).ok());
+    ASSERT_TRUE(store->removeModel(to_merged).ok());
+    ASSERT_TRUE(store->setSuccessor(to_merged, absorbed).ok());
+    model::ObjectModel joined = objdb::testing::makeStoreModel(6, 2);
+    joined.id = target;
+    database::MergeRecord merge;
+    merge.target = target;
+    merge.source = absl::StrFormat("model %d", absorbed);
+    ASSERT_TRUE(store->absorbModel(std::move(joined), merge, absorbed).ok());
+    ASSERT_TRUE(store->removeModel(nowhere).ok());
+  }
+  auto server = startOrDie(loopbackOptions(db_path));
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  auto get = [&](int64_t id) {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetObjectRequest request;
+    request.set_id(uint64_t(id));
+    v1::ObjectDetail detail;
+    return stub->GetObject(&context, request, &detail);
+  };
+  grpc::Status s = get(to_active);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(s.error_message(), absl::StrFormat("object %d was removed; its segment is in object %d now",
+                                               to_active, target));
+  s = get(to_merged);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(s.error_message(), absl::StrFormat("object %d was removed; its segment is in object %d now",
+                                               to_merged, target))
+      << "its successor merged into " << target;
+  s = get(nowhere);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(s.error_message().rfind(
+                absl::StrFormat("object %d was removed; no object holds its segment now", nowhere), 0),
+            0u)
+      << s.error_message();
+  s = get(nowhere + 10);
+  EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(s.error_message(), absl::StrFormat("no object %d", nowhere + 10));
+  EXPECT_TRUE(get(absorbed).ok()) << "a merged object is still served, in state merged";
+  EXPECT_TRUE(get(target).ok());
 }
 
 TEST(ObjectDatabaseService, AStreamedSessionBuildsWhatTheOfflinePipelineBuildsAndCanBeQueried) {
@@ -555,8 +613,9 @@ std::string pngDeclaring(bool grey16, uint32_t width, uint32_t height) {
   return png;
 }
 
-// RELIABILITY.md R7 (b), (c): sizes far beyond the session's are refused from the headers,
-// before anything of that size is allocated; the session carries on.
+// Amplifying inputs, a frame header or a PNG that declares huge dimensions: sizes far beyond
+// the session's are refused from the headers, before anything of that size is allocated; the
+// session carries on.
 TEST(ObjectDatabaseService, AmplifyingSizesAreRefusedBeforeAllocating) {
   auto server = startOrDie(loopbackOptions());
   ASSERT_NE(server, nullptr);
@@ -731,7 +790,7 @@ TEST(ObjectDatabaseService, EndSessionWaitsForTheStreamAndFlushesAnInterruptedOn
   EXPECT_NE(server->store().scene("wednesday").value(), nullptr);
 }
 
-// RELIABILITY.md R4 at the service: the disk fails (every write, sync and truncate from then on)
+// I/O errors at the service: the disk fails (every write, sync and truncate from then on)
 // while EndSession flushes a session into the database. EndSession answers UNAVAILABLE naming the
 // segment and what the store was doing; nothing crashes, and the session's map stays in memory.
 // Once the disk is back, EndSession again flushes it, and the database ends as a run without the
@@ -969,8 +1028,33 @@ TEST(ObjectDatabaseService, SessionsBeyondTheLimitAreRefusedUntilOneEnds) {
   EXPECT_TRUE(second.status.ok()) << second.status.error_message();
 }
 
+// Ended sessions leave memory beyond ended_sessions_kept, oldest first; the store then answers a
+// repeated EndSession (with the counters it keeps).
+TEST(ObjectDatabaseService, EndedSessionsBeyondTheKeptNumberAreDroppedFromMemory) {
+  ServerOptions options = loopbackOptions();
+  options.ended_sessions_kept = 1;
+  auto server = startOrDie(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  for (const char* name : {"first", "second", "third"}) {
+    ASSERT_TRUE(ingest(*stub, session(name, 2)).status.ok()) << name;
+    v1::EndSessionResponse ended;
+    ASSERT_TRUE(endSession(*stub, name, &ended).ok()) << name;
+    EXPECT_EQ(ended.summary().counters().frames_received(), 2u) << name;
+  }
+  for (const char* name : {"first", "second", "third"}) {
+    v1::EndSessionResponse again;
+    ASSERT_TRUE(endSession(*stub, name, &again).ok()) << name;
+    EXPECT_EQ(again.summary().state(), v1::SESSION_STATE_ENDED) << name;
+    EXPECT_EQ(again.summary().counters().frames_integrated(), 2u) << name;
+    // In memory: every counter; from the store: frames and objects only.
+    EXPECT_EQ(again.summary().counters().frames_received(), std::string(name) == "third" ? 2u : 0u)
+        << name;
+  }
+}
+
 TEST(ObjectDatabaseService, ConcurrentStreamsAndReadersAllSucceed) {
-  // RELIABILITY R8, reduced for two cores (bench/server_load runs it at full size): three
+  // Concurrent load, reduced for two cores (bench/server_load runs it at full size): three
   // sessions stream at once while four threads query; every call succeeds and every stream's
   // acks arrive in order.
   auto server = startOrDie(loopbackOptions());
@@ -1031,7 +1115,7 @@ TEST(ObjectDatabaseService, ConcurrentStreamsAndReadersAllSucceed) {
 }
 
 TEST(ObjectDatabaseService, AClientThatStopsReadingHoldsItsFramesBackAndIsEndedAfterTheTimeout) {
-  // RELIABILITY R10 (b): a client writes frames but reads nothing. Once its transport window is
+  // A slow reader: a client writes frames but reads nothing. Once its transport window is
   // full and max_pending_events wait, the server takes no more frames; after slow_reader_timeout
   // the stream ends with RESOURCE_EXHAUSTED, and the session can still be ended. (The 1 KiB
   // window holds the acks of about 35 frames.)

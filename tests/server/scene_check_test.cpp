@@ -1,4 +1,4 @@
-// Model-to-scene verification on the server path (paper §III-C.4, issue 17): a merge within one
+// Model-to-scene verification on the server path (paper §III-C.4): a merge within one
 // live session is verified at both poses against the session's map as it is in memory, before
 // the session has a stored scene. Two identical boxes in one session merge, with both poses
 // checked; when the first box is taken away before the second is extracted, the live map at the

@@ -1,4 +1,4 @@
-// RELIABILITY.md R1 on the server binary: objdb-server is SIGKILLed while a session streams in
+// Crash safety of the server binary: objdb-server is SIGKILLed while a session streams in
 // (after a random number of acks), while EndSession flushes it, or after EndSession answered,
 // then restarted on the same file, eight times over. Nothing the server reported as done may be
 // lost: every object of an answered EndSession is stored, every stored model loads whole,

@@ -78,7 +78,7 @@ TEST(SqliteStoreConcurrency, ReadersNeverSeeHalfWrittenModels) {
   EXPECT_EQ(writer_store->modelIds().value().size(), 31u);
 }
 
-// An online backup (RELIABILITY.md R8) taken while a writer inserts and merges: each copy opens,
+// An online backup taken while a writer inserts and merges: each copy opens,
 // passes every check, and holds only whole models — as many as were committed at some moment
 // of the run. The writer never waits for the backups. A backup never overwrites a file.
 TEST(SqliteStoreConcurrency, OnlineBackupsAreConsistentCopiesWhileAWriterCarriesOn) {

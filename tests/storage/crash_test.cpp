@@ -1,4 +1,4 @@
-// R1: a child process inserts, merges and stores raw segments in a loop and reports every
+// Crashes: a child process inserts, merges and stores raw segments in a loop and reports every
 // commit on a pipe; the parent kills it with SIGKILL at a random moment. After every kill the
 // file must open, pass SQLite's integrity check and every blob's check, and hold every id the
 // child reported as committed, whole. 50 trials here; OBJDB_CRASH_TRIALS=N for a longer run

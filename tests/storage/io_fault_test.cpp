@@ -1,4 +1,4 @@
-// I/O errors and a full disk under the store (RELIABILITY.md R4): a fault-injecting VFS fails the
+// I/O errors and a full disk under the store: a fault-injecting VFS fails the
 // k-th write, sync or truncate of one insert, once and from then on, for every k. Each time the
 // insert reports UNAVAILABLE naming what it was doing, nothing crashes, and once the fault is
 // lifted the file passes its checks, the model is wholly there or wholly absent, and the same

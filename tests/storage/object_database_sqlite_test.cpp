@@ -69,7 +69,28 @@ TEST(ObjectDatabaseOnSqlite, MatchesInMemoryAndCarriesOnAfterReopen) {
   EXPECT_EQ(store->model(1).value()->observations.size(), 2u);
 }
 
-// RELIABILITY.md R4 at the database level: Tuesday's insert, which merges into Monday's model,
+// A lone segment extracted again after it changed: its first model is emptied and removed, and the
+// tombstone names the model that holds the segment now.
+TEST(ObjectDatabaseOnSqlite, ARemovedModelsTombstoneNamesWhereItsSegmentWent) {
+  objdb::testing::TempDir dir;
+  auto store = SqliteStore::open((dir / "db.sqlite").string()).value();
+  ASSERT_TRUE(store->putScene("monday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({kMonday}))).ok());
+  auto db = database::ObjectDatabase::create(params(), store.get()).value();
+  const auto first =
+      db->insertSegment("monday", objdb::testing::rawSegment(7, kMonday, View{-0.3f, 0.1f}));
+  ASSERT_TRUE(first.ok()) << first.status();
+  const auto again =
+      db->insertSegment("monday", objdb::testing::rawSegment(7, kMonday, View{-0.3f, 0.2f}));
+  ASSERT_TRUE(again.ok()) << again.status();
+  ASSERT_EQ(again->removed_model, first->model_id);
+  ASSERT_NE(again->model_id, first->model_id);
+  const ModelFate fate = store->modelFate(first->model_id).value();
+  EXPECT_EQ(fate.state, "removed");
+  EXPECT_EQ(fate.next, again->model_id);
+  EXPECT_EQ(store->modelFate(again->model_id).value().state, "active");
+}
+
+// I/O errors at the database level: Tuesday's insert, which merges into Monday's model,
 // meets a store whose k-th write, sync or truncate fails and keeps failing. It reports the error;
 // retried once the fault is lifted, it ends as an insert that never failed (one model holding
 // both segments, one merge record), and the file passes its checks.

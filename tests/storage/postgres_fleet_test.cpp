@@ -1,4 +1,4 @@
-// Several servers on one PostgreSQL database (issue 20), at the store and database level: the
+// Several servers on one PostgreSQL database, at the store and database level: the
 // writer lock has one holder across stores (processes), the models' change sequence tells a
 // store what the others changed, and an object database catches up on the models another
 // server's database created, so that a segment of the same object merges into that model instead

@@ -167,6 +167,32 @@ TEST_P(StoreConformance, ReplaceAndRemoveKeepIdsStableAndNeverReuseThem) {
   EXPECT_EQ(stats.merged_models, 0);
 }
 
+TEST_P(StoreConformance, ARemovedModelNamesTheModelThatHoldsItsSegmentNow) {
+  const std::string target = freshTarget();
+  auto store = open(target);
+  ASSERT_NE(store, nullptr);
+  const int64_t a = store->addModel(makeStoreModel(1, 1)).value();
+  const int64_t b = store->addModel(makeStoreModel(2, 1)).value();
+  EXPECT_EQ(store->modelFate(a).value().state, "active");
+  EXPECT_EQ(store->modelFate(a + b + 100).value().state, "") << "never existed";
+  ASSERT_TRUE(store->removeModel(a).ok());
+  ModelFate fate = store->modelFate(a).value();
+  EXPECT_EQ(fate.state, "removed");
+  EXPECT_EQ(fate.next, 0) << "not known yet";
+  ASSERT_TRUE(store->setSuccessor(a, b).ok());
+  // Only a tombstone takes a successor: an active model is not retired by it.
+  ASSERT_TRUE(store->setSuccessor(b, a).ok());
+  EXPECT_EQ(store->modelFate(b).value().state, "active");
+  EXPECT_EQ(store->modelFate(b).value().next, 0);
+  store.reset();
+  store = open(target);
+  ASSERT_NE(store, nullptr);
+  fate = store->modelFate(a).value();
+  EXPECT_EQ(fate.state, "removed");
+  EXPECT_EQ(fate.next, b) << "kept across a reopen";
+  EXPECT_EQ(store->model(a).status().code(), absl::StatusCode::kNotFound);
+}
+
 TEST_P(StoreConformance, AnAbsorbedModelIsKeptAsMergedIntoItsTargetInOneUnit) {
   const std::string target = freshTarget();
   auto store = open(target);
@@ -187,6 +213,8 @@ TEST_P(StoreConformance, AnAbsorbedModelIsKeptAsMergedIntoItsTargetInOneUnit) {
     ASSERT_EQ(idsOf(summaries), sorted({a, b}));
     const ModelSummary* absorbed = findSummary(summaries, b);
     EXPECT_EQ(absorbed->state, "merged");
+    EXPECT_EQ(store->modelFate(b).value().state, "merged");
+    EXPECT_EQ(store->modelFate(b).value().next, a);
     EXPECT_EQ(absorbed->merged_into, a);
     EXPECT_TRUE(absorbed->observations.empty());
     const ModelSummary* into = findSummary(summaries, a);

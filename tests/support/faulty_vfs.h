@@ -1,4 +1,4 @@
-// A fault-injecting SQLite VFS for the I/O-error tests (RELIABILITY.md R4), our own code after
+// A fault-injecting SQLite VFS for the I/O-error tests, our own code after
 // SQLite's technique: it wraps the platform's default VFS, counts the write, sync and truncate
 // calls made on every file SQLite opens (database, WAL, journal), and fails the k-th one once or
 // from then on. A size cap emulates a full disk, per file: a write that ends past the cap in any

@@ -422,7 +422,7 @@ TEST(TumDatasetWriter, RejectsNonIncreasingTimestamps) {
   EXPECT_THAT(std::string(s.message()), HasSubstr("not after"));
 }
 
-// Real sequences in ../shared/data (absent in a fresh clone: skip).
+// Real TUM-layout sequences (e.g. SUN3D) in OBJDB_SHARED_DATA_DIR (absent in a fresh clone: skip).
 TEST(TumDataset, SharedSequencesLoadFirstAndLastFrame) {
   const fs::path shared(OBJDB_SHARED_DATA_DIR);
   std::error_code ec;
