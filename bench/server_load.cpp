@@ -33,6 +33,7 @@
 #include "server/proto_convert.h"
 #include "server/server.h"
 #include "storage/sqlite/sqlite_store.h"
+#include "bench/bench_sessions.h"
 
 namespace objdb {
 namespace {
@@ -45,51 +46,6 @@ double msSince(Clock::time_point t) {
 [[noreturn]] void die(const std::string& what) {
   std::fprintf(stderr, "server_load: %s\n", what.c_str());
   std::exit(1);
-}
-
-// The object kinds of the synthetic library, one per stream: the sessions share no object kind.
-const std::vector<std::string>& kinds() {
-  static const std::vector<std::string> k = {"cow",        "cube_chair",   "fire_extinguisher",
-                                             "gas_cylinder", "helmet",     "large_box",
-                                             "round_chair", "round_table", "small_container",
-                                             "square_table"};
-  return k;
-}
-
-// The wire messages of one session: header, then every frame (float depth, RGB8 colour).
-std::vector<v1::IngestRequest> renderSession(const std::string& name, const std::string& kind,
-                                             int frames) {
-  sim::Scene scene = sim::twoBoxesScene("tango", frames);
-  scene.name = name;
-  // Keep the floor, replace the two boxes by one object of `kind`.
-  std::erase_if(scene.objects, [](const sim::SceneObject& o) { return !o.structure; });
-  sim::SceneObject object;
-  object.id = 1;
-  object.category = kind;
-  object.mesh = kind;
-  object.albedo = Rgb8{150, 120, 90};
-  scene.objects.push_back(object);
-  const auto built = sim::buildScene(scene);
-  const auto poses = sim::sampleTrajectory(scene.trajectory);
-  if (!built.ok() || !poses.ok()) die("cannot build the scene of " + kind);
-  const sim::Renderer renderer(scene.intrinsics);
-  std::vector<v1::IngestRequest> requests(1);
-  v1::SessionHeader& h = *requests[0].mutable_header();
-  h.set_session_name(name);
-  h.set_client_info("server_load");
-  *h.mutable_intrinsics() = server::toProto(scene.intrinsics);
-  for (size_t i = 0; i < poses->size(); ++i) {
-    const Frame frame = sim::renderFrame(scene, *built, renderer, (*poses)[i], i, true);
-    v1::IngestRequest request;
-    v1::Frame& f = *request.mutable_frame();
-    f.set_index(i);
-    f.set_timestamp_s(frame.timestamp);
-    *f.mutable_t_world_camera() = server::toProto(frame.T_world_camera);
-    *f.mutable_depth() = server::encodeDepth(frame.depth);
-    *f.mutable_color() = server::encodeColor(*frame.color);
-    requests.push_back(std::move(request));
-  }
-  return requests;
 }
 
 void setDeadline(grpc::ClientContext* context, double seconds) {
@@ -324,10 +280,10 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (streams < 1 || streams > int(kinds().size()) || readers < 0 || readers > 1000 || frames < 2 ||
+  if (streams < 1 || streams > int(bench::objectKinds().size()) || readers < 0 || readers > 1000 || frames < 2 ||
       frames > 1000 || !(seconds > 0)) {
     std::fprintf(stderr, "server_load: --streams 1..%zu (one object kind each), --readers 0..1000, "
-                         "--frames 2..1000, --seconds > 0\n", kinds().size());
+                         "--frames 2..1000, --seconds > 0\n", bench::objectKinds().size());
     return 2;
   }
   setLogLevel("warn");
@@ -336,9 +292,11 @@ int main(int argc, char** argv) {
   std::vector<std::string> names;
   auto t = Clock::now();
   for (int s = 0; s < streams; ++s) {
-    const std::string& kind = kinds()[size_t(s)];
+    const std::string& kind = bench::objectKinds()[size_t(s)];
     names.push_back("load_" + std::to_string(s) + "_" + kind);
-    sessions.push_back(renderSession(names.back(), kind, frames));
+    auto rendered = bench::renderSession(names.back(), kind, frames, "tango", "server_load");
+    if (!rendered.ok()) die("cannot build the scene of " + kind + ": " + rendered.status().ToString());
+    sessions.push_back(*std::move(rendered));
   }
   std::printf("%d sessions of %d Tango frames rendered in %.1f s (one object kind each on a floor)\n",
               streams, frames, msSince(t) / 1000);

@@ -70,6 +70,14 @@ options:
                           seconds while they wait (at 64 waiting acks and events its frames
                           wait too), with RESOURCE_EXHAUSTED; the session is kept
                           (interrupted) for EndSession, 1..86400 (default 60)
+  --keepalive-s S         ping a client with calls open after S seconds without traffic from it
+                          (default 60), and close its connection when no answer comes within
+                          --keepalive-timeout-s S (default 20): a client that vanished without
+                          closing its connection (powered off, suspended) has its streams
+                          broken, and its sessions kept (interrupted) for EndSession
+  --max-connection-idle-s S
+                          close a connection without calls after S seconds (default 900; 0 =
+                          never); its client reconnects when it calls again
   --log-level LEVEL       trace, debug, info, warn, error, critical or off (default info)
   -h, --help              show this text and exit
 
@@ -123,6 +131,21 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       }
       return true;
     };
+    // Seconds as a number in [min, max] (or 0 when zero_means_never), to milliseconds.
+    auto take_seconds = [&](double min, double max, bool zero_means_never,
+                            std::chrono::milliseconds* out) {
+      std::string text;
+      if (!take_value(&text)) return false;
+      double seconds = 0.0;
+      if (!absl::SimpleAtod(text, &seconds) ||
+          !((seconds >= min && seconds <= max) || (zero_means_never && seconds == 0.0))) {
+        *error = absl::StrFormat("%s must be %sa number of seconds in [%g, %g], got \"%s\"", arg,
+                                 zero_means_never ? "0 (never) or " : "", min, max, text);
+        return false;
+      }
+      *out = std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
+      return true;
+    };
     auto no_value = [&]() {
       if (has_inline_value) *error = absl::StrFormat("%s takes no value", arg);
       return !has_inline_value;
@@ -165,31 +188,19 @@ bool parseCommandLine(int argc, char** argv, CommandLine* cli, std::string* erro
       if (!take_int(0, 7 * 24 * 3600, &seconds)) return false;
       cli->options.auto_end_after = std::chrono::seconds(seconds);
     } else if (arg == "--save-map-s") {
-      std::string text;
-      if (!take_value(&text)) return false;
-      double seconds = 0.0;
-      if (!absl::SimpleAtod(text, &seconds) || !(seconds >= 0.0 && seconds <= 24 * 3600.0) ||
-          (seconds > 0.0 && seconds < 0.001)) {
-        *error = absl::StrFormat(
-            "%s must be 0 (never) or a number of seconds in [0.001, 86400], got \"%s\"", arg,
-            text);
-        return false;
-      }
-      cli->options.save_map_every =
-          std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
+      if (!take_seconds(0.001, 24 * 3600.0, true, &cli->options.save_map_every)) return false;
     } else if (arg == "--server-id") {
       if (!take_value(&cli->options.server_id)) return false;
     } else if (arg == "--lease-s") {
-      std::string text;
-      if (!take_value(&text)) return false;
-      double seconds = 0.0;
-      if (!absl::SimpleAtod(text, &seconds) || !(seconds >= 0.1 && seconds <= 3600.0)) {
-        *error = absl::StrFormat("%s must be a number of seconds in [0.1, 3600], got \"%s\"",
-                                 arg, text);
+      if (!take_seconds(0.1, 3600.0, false, &cli->options.lease_ttl)) return false;
+    } else if (arg == "--keepalive-s") {
+      if (!take_seconds(0.1, 24 * 3600.0, false, &cli->options.keepalive_time)) return false;
+    } else if (arg == "--keepalive-timeout-s") {
+      if (!take_seconds(0.1, 3600.0, false, &cli->options.keepalive_timeout)) return false;
+    } else if (arg == "--max-connection-idle-s") {
+      if (!take_seconds(0.1, 7 * 24 * 3600.0, true, &cli->options.max_connection_idle)) {
         return false;
       }
-      cli->options.lease_ttl =
-          std::chrono::milliseconds(static_cast<int64_t>(seconds * 1000.0 + 0.5));
     } else if (arg == "--slow-reader-s") {
       int seconds = 0;
       if (!take_int(1, 24 * 3600, &seconds)) return false;

@@ -185,7 +185,15 @@ void ObjectDatabaseService::stop() {
 grpc::ServerUnaryReactor* ObjectDatabaseService::answerOffThread(
     grpc::CallbackServerContext* context, std::function<Status()> work) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  const Status queued = queries_->submit([reactor, context, work = std::move(work)] {
+  if (draining_.load()) {
+    reactor->Finish(toGrpcStatus(shuttingDown()));
+    return reactor;
+  }
+  const Status queued = queries_->submit([this, reactor, context, work = std::move(work)] {
+    if (draining_.load()) {
+      reactor->Finish(toGrpcStatus(shuttingDown()));
+      return;
+    }
     if (context->IsCancelled()) {  // the client went away (or its deadline passed) meanwhile
       reactor->Finish(grpc::Status(grpc::StatusCode::CANCELLED, "the call ended before it ran"));
       return;
@@ -567,7 +575,11 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
   // second call queued behind the flush answers with the ended session's summary.
   auto job = [this, session, reactor, response] {
     Status status = absl::OkStatus();
-    if (!session->ended()) status = flush(*session);
+    if (!session->ended()) {
+      logger("server")->info("session {}: EndSession: flushing its map into the database",
+                             session->name);
+      status = flush(*session);
+    }
     if (status.ok()) {
       auto summary = summaryOf(*session);
       if (summary.ok()) {

@@ -112,6 +112,9 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // This server's name as lease holder (ServiceOptions::server_id, or the one made up).
   const std::string& serverId() const { return server_id_; }
 
+  // The drain began (before the gRPC server's Shutdown): queries that come now are answered
+  // UNAVAILABLE "the server is shutting down" instead of being started.
+  void beginDrain() { draining_.store(true); }
   // After the gRPC server stopped (no call in flight): waits for the workers, then ends every
   // session that did not end (its map is stored; if that fails it is stored as interrupted) and
   // runs the database queue dry. Later calls return at once.
@@ -242,6 +245,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   std::list<Worker> workers_;
   bool stopped_ = false;
   size_t opening_ = 0;  // sessions between their limit check and their publication
+  std::atomic<bool> draining_{false};
 
   std::atomic<uint64_t> jobs_cancelled_{0};
   std::atomic<uint64_t> candidates_skipped_{0};

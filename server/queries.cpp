@@ -329,11 +329,23 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
   if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
     return new RefusedCall<grpc::ServerWriteReactor<v1::MeshChunk>>(toGrpcStatus(allowed));
   }
+  if (draining_.load()) {
+    return new RefusedCall<grpc::ServerWriteReactor<v1::MeshChunk>>(toGrpcStatus(shuttingDown()));
+  }
   auto* reactor = new SceneMeshReactor();
   const std::string name = request->session_name();
   const bool completed = request->completed();
   const Status queued = scenes_->submit([this, reactor, name, completed, context] {
+    // A deadline or a cancel stops the work where it is checked: before it starts (it may have
+    // waited in the pool's queue), between the models of a completion, and before and after the
+    // meshing.
+    const auto stopIfCancelled = [&](const char* where) -> Status {
+      if (!context->IsCancelled()) return absl::OkStatus();
+      return absl::CancelledError(
+          absl::StrFormat("GetSceneMesh of session %s cancelled %s", name, where));
+    };
     auto run = [&]() -> StatusOr<std::vector<TriangleMesh>> {
+      OBJDB_RETURN_IF_ERROR(stopIfCancelled("before it started"));
       OBJDB_RETURN_IF_ERROR(checkNotRecovering(name));
       OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
       const auto it = std::find_if(stored.begin(), stored.end(),
@@ -362,15 +374,16 @@ grpc::ServerWriteReactor<v1::MeshChunk>* ObjectDatabaseService::GetSceneMesh(
       const Params params = storedSessionParams(*it);
       TriangleMesh mesh;
       if (completed) {
-        // A deadline or a cancel stops the work between models.
         OBJDB_ASSIGN_OR_RETURN(
             const tsdf::TsdfLayer full,
             completion::completeScene(*store_, name, options_.params.merging, params.tsdf, nullptr,
                                       [context] { return context->IsCancelled(); }));
+        OBJDB_RETURN_IF_ERROR(stopIfCancelled("after the completion, before the meshing"));
         mesh = tsdf::extractMesh(full, params.tsdf.mesh_min_weight);
       } else {
         mesh = tsdf::extractMesh(*scene, params.tsdf.mesh_min_weight);
       }
+      OBJDB_RETURN_IF_ERROR(stopIfCancelled("after the meshing"));
       return splitMesh(mesh, options_.mesh_chunk_bytes);
     };
     auto chunks = run();

@@ -4,6 +4,7 @@
 #include <grpcpp/health_check_service_interface.h>
 
 #include <algorithm>
+#include <thread>
 #include <utility>
 
 #include "core/common/logging.h"
@@ -42,6 +43,22 @@ Status ServerOptions::validate() const {
         absl::StrFormat("drain_deadline is %d ms, must be in [0, %d] ms",
                         static_cast<int64_t>(drain_deadline.count()),
                         static_cast<int64_t>(kMaxDrainDeadline.count())));
+  }
+  if (keepalive_time < std::chrono::milliseconds(100) || keepalive_time > std::chrono::hours(24) ||
+      keepalive_timeout < std::chrono::milliseconds(100) ||
+      keepalive_timeout > std::chrono::hours(1)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "keepalive_time is %d ms and keepalive_timeout %d ms; they must be in [100 ms, 24 h] and "
+        "[100 ms, 1 h]",
+        static_cast<int64_t>(keepalive_time.count()),
+        static_cast<int64_t>(keepalive_timeout.count())));
+  }
+  if (max_connection_idle.count() != 0 &&
+      (max_connection_idle < std::chrono::milliseconds(100) ||
+       max_connection_idle > std::chrono::hours(24 * 7))) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "max_connection_idle is %d ms; it must be 0 (never) or in [100 ms, 7 days]",
+        static_cast<int64_t>(max_connection_idle.count())));
   }
   if (ended_sessions_kept < 0 || ended_sessions_kept > 100000) {
     return absl::InvalidArgumentError(absl::StrFormat(
@@ -136,6 +153,16 @@ StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& o
   // gRPC sets SO_REUSEPORT by default on Linux, which lets a second server bind a port that is
   // already in use and silently share its traffic. A busy port must be an error instead.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  // Vanished clients: pings on connections with calls open; idle connections closed.
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, int(options.keepalive_time.count()));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
+                             int(options.keepalive_timeout.count()));
+  builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 0);
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+  if (options.max_connection_idle.count() > 0) {
+    builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS,
+                               int(options.max_connection_idle.count()));
+  }
 
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (server == nullptr || port == 0) {
@@ -190,7 +217,13 @@ void ObjdbServer::shutdown() {
   if (grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService()) {
     health->SetServingStatus(false);
   }
-  server_->Shutdown(std::chrono::system_clock::now() + options_.drain_deadline);
+  service_->beginDrain();
+  // A short notice first: calls that arrive now are answered UNAVAILABLE by the service (and
+  // health watchers and load balancers see NOT_SERVING), before gRPC stops taking calls, when a
+  // call racing the server's GOAWAY would end CANCELLED instead. It counts against the deadline.
+  const auto notice = std::min<std::chrono::milliseconds>(kDrainNotice, options_.drain_deadline);
+  std::this_thread::sleep_for(notice);
+  server_->Shutdown(std::chrono::system_clock::now() + options_.drain_deadline - notice);
   server_->Wait();
   // No call in flight any more: let the session workers and the database queue finish.
   service_->stop();

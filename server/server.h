@@ -64,6 +64,14 @@ struct ServerOptions {
   // session is kept, INTERRUPTED, for EndSession, as after a broken stream).
   int max_pending_events = 64;
   std::chrono::milliseconds slow_reader_timeout{60 * 1000};
+  // HTTP/2 keepalive: a client with calls open is pinged after keepalive_time without traffic
+  // from it; without an answer within keepalive_timeout its connection is closed (its streams
+  // break: a client that vanished without closing its connection). 100 ms .. 24 h, 100 ms .. 1 h.
+  std::chrono::milliseconds keepalive_time{60 * 1000};
+  std::chrono::milliseconds keepalive_timeout{20 * 1000};
+  // A connection without calls is closed after this (0: never; else 100 ms .. 7 days); its client
+  // reconnects when it calls again.
+  std::chrono::milliseconds max_connection_idle{15 * 60 * 1000};
   // Sessions whose map is in memory at once (streaming, or not ended yet; ~0.1-0.15 GB each for a
   // room at 2 cm). One more Ingest is refused with RESOURCE_EXHAUSTED.
   int max_open_sessions = 16;
@@ -98,6 +106,9 @@ inline constexpr char kObjectDatabaseServiceName[] = "objdb.v1.ObjectDatabase";
 inline constexpr int kMinMessageBytes = 4 * 1024;
 inline constexpr int kMaxMessageBytes = 1024 * 1024 * 1024;
 inline constexpr std::chrono::milliseconds kMaxDrainDeadline{10 * 60 * 1000};
+// At a shutdown, how long new calls are answered UNAVAILABLE before gRPC stops taking calls
+// (part of the drain deadline).
+inline constexpr std::chrono::milliseconds kDrainNotice{200};
 inline constexpr int kMaxOpenSessions = 1024;
 
 // A running server. Thread-safe; shutdown() may be called from any thread, any number of times.

@@ -57,4 +57,9 @@ uint32_t pageSize(uint32_t requested) {
   return requested == 0 ? kDefaultPageSize : std::min(requested, kMaxPageSize);
 }
 
+Status shuttingDown() {
+  return absl::UnavailableError(
+      "the server is shutting down: retry on another server, or once it has restarted");
+}
+
 }  // namespace objdb::server

@@ -35,5 +35,7 @@ Status authorize(const grpc::CallbackServerContext* context, const std::string& 
 std::string pageToken(char kind, int64_t last_id, uint64_t filter);
 StatusOr<int64_t> parsePageToken(const std::string& token, char kind, uint64_t filter);
 uint32_t pageSize(uint32_t requested);
+// UNAVAILABLE for a call that came while the server drains.
+Status shuttingDown();
 
 }  // namespace objdb::server

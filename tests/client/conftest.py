@@ -75,6 +75,14 @@ def server(tmp_path):
 
 
 @pytest.fixture
+def keepalive_server(tmp_path):
+    """A server that pings its clients after 0.5 s of silence and gives up 0.5 s later."""
+    s = Server(tmp_path / "server", "--keepalive-s", "0.5", "--keepalive-timeout-s", "0.5")
+    yield s
+    s.stop()
+
+
+@pytest.fixture
 def token_server(tmp_path):
     token = "python-client-test-token-0123456789"
     path = tmp_path / "token"

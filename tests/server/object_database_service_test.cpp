@@ -1028,6 +1028,74 @@ TEST(ObjectDatabaseService, SessionsBeyondTheLimitAreRefusedUntilOneEnds) {
   EXPECT_TRUE(second.status.ok()) << second.status.error_message();
 }
 
+// A deadline on an expensive GetSceneMesh (completed): the client gets DEADLINE_EXCEEDED, and the
+// server stops the work at its next check and counts it in jobs_cancelled. Deadlines from 1 ms up
+// until one expires while the server works (a shorter one may expire before the call reaches it).
+TEST(ObjectDatabaseService, ADeadlineOnACompletedSceneStopsTheServersWork) {
+  using Clock = std::chrono::steady_clock;
+  auto server = startOrDie(loopbackOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = stubFor(*server);
+  ASSERT_TRUE(ingest(*stub, session("scene", 40)).everyFrameAccepted(40));
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "scene", &ended).ok());
+  const auto cancelledJobs = [&] {
+    grpc::ClientContext context;
+    setDeadline(&context);
+    v1::GetStatsResponse stats;
+    EXPECT_TRUE(stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    return stats.jobs_cancelled();
+  };
+  ASSERT_EQ(cancelledJobs(), 0u);
+  size_t exceeded = 0;
+  uint64_t cancelled = 0;
+  for (const int deadline_ms : {1, 2, 5, 10, 20, 50, 100, 200}) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::milliseconds(deadline_ms));
+    v1::GetSceneMeshRequest request;
+    request.set_session_name("scene");
+    request.set_completed(true);
+    const Clock::time_point t = Clock::now();
+    auto reader = stub->GetSceneMesh(&context, request);
+    v1::MeshChunk chunk;
+    while (reader->Read(&chunk)) {
+    }
+    const grpc::Status status = reader->Finish();
+    const double answered_ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+    ASSERT_TRUE(status.ok() || status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED)
+        << status.error_message();
+    if (status.ok()) continue;
+    ++exceeded;
+    // The server stops at its next check: give it a bounded while.
+    const Clock::time_point asked = Clock::now();
+    while ((cancelled = cancelledJobs()) == 0 && Clock::now() - asked < std::chrono::seconds(10)) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    if (cancelled > 0) {
+      std::printf("GetSceneMesh(completed) with a %d ms deadline: DEADLINE_EXCEEDED after %.1f ms, "
+                  "counted as cancelled by the server %.1f ms later\n",
+                  deadline_ms, answered_ms,
+                  std::chrono::duration<double, std::milli>(Clock::now() - asked).count());
+      break;
+    }
+  }
+  EXPECT_GT(exceeded, 0u) << "every call finished within its deadline";
+  EXPECT_GT(cancelled, 0u);
+  // The server is not left busy: the same call without a short deadline is answered.
+  grpc::ClientContext context;
+  setDeadline(&context);
+  v1::GetSceneMeshRequest request;
+  request.set_session_name("scene");
+  request.set_completed(true);
+  auto reader = stub->GetSceneMesh(&context, request);
+  v1::MeshChunk chunk;
+  size_t chunks = 0;
+  while (reader->Read(&chunk)) ++chunks;
+  EXPECT_TRUE(reader->Finish().ok());
+  EXPECT_GT(chunks, 0u);
+}
+
 // Ended sessions leave memory beyond ended_sessions_kept, oldest first; the store then answers a
 // repeated EndSession (with the counters it keeps).
 TEST(ObjectDatabaseService, EndedSessionsBeyondTheKeptNumberAreDroppedFromMemory) {

@@ -2,7 +2,11 @@
 queries with known answers, and every bad input as a clear error."""
 
 import json
+import os
 import shutil
+import signal
+import subprocess
+import sys
 import threading
 import time
 
@@ -292,3 +296,42 @@ def test_bad_dataset_folders_are_clear_errors(tmp_path):
         '{"width": 4, "height": 3, "fx": 2, "fy": 2, "cx": 1.5, "cy": 1}')
     with pytest.raises(ValueError, match=r"poses.txt:1: expected .timestamp tx ty tz"):
         Dataset(tmp_path)
+
+
+VANISHING_CLIENT = """
+import sys, time
+import numpy as np
+import objdb
+K = objdb.Intrinsics(64, 48, 60.0, 60.0, 31.5, 23.5)
+def frames():
+    for i in range(2):
+        yield objdb.Frame(depth=np.full((48, 64), 1.5, np.float32), pose=np.eye(4),
+                          timestamp=0.1 * i)
+    time.sleep(3600)  # the stream stays open, and the process is stopped meanwhile
+with objdb.Client(sys.argv[1]) as db:
+    for event in db.stream(frames(), session="vanished", intrinsics=K):
+        if isinstance(event, objdb.FrameAck) and event.index == 1:
+            print("acked", flush=True)
+"""
+
+
+def test_a_client_that_vanishes_without_closing_its_connection_is_cut_off_by_keepalive(
+        keepalive_server):
+    # A client stopped with SIGSTOP sends nothing, not even a TCP reset: only the server's
+    # HTTP/2 keepalive pings find it gone. The session is then interrupted (kept for EndSession).
+    server = keepalive_server
+    client = subprocess.Popen([sys.executable, "-c", VANISHING_CLIENT, server.address],
+                              stdout=subprocess.PIPE, text=True, env=dict(os.environ))
+    try:
+        assert client.stdout.readline().strip() == "acked"
+        with objdb.Client(server.address) as db:
+            assert {s.name: s.state for s in db.sessions()}["vanished"] == "open"
+            client.send_signal(signal.SIGSTOP)
+            stopped = time.monotonic()
+            assert wait_for_state(db, "vanished", "interrupted", seconds=30)
+            print(f"\nkeepalive 0.5 s + timeout 0.5 s: the stopped client's session was "
+                  f"interrupted {time.monotonic() - stopped:.2f} s after SIGSTOP")
+            assert db.end_session("vanished").state == "ended"
+    finally:
+        client.kill()
+        client.wait()
