@@ -14,6 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "client/cli_util.h"
 #include "client/commands.h"
+#include "client/db_replay.h"
 #include "core/common/params_io.h"
 #include "core/completion/scene_completion.h"
 #include "core/io/mesh_io.h"
@@ -31,6 +32,7 @@ constexpr const char* kUsage = R"(usage: objdb db check  --db FILE
        objdb db export --db FILE --model ID --out FILE.ply [--what cloud|mesh] [--min-weight W]
        objdb db complete --db FILE --session NAME --out FILE.ply [--config FILE] [--min-weight W]
        objdb db backup --db FILE --out NEW_FILE
+       objdb db replay --db FILE [--config FILE]
 
 Administration of an objdb database: an SQLite file (opened read-only; nothing is written to
 it) or a PostgreSQL database named by a libpq URI (postgresql://USER@HOST/DB; credentials from
@@ -56,6 +58,14 @@ it) or a PostgreSQL database named by a libpq URI (postgresql://USER@HOST/DB; cr
            or not at all, never over an existing file, and is checked like `check` does; exit
            status 1 if anything fails. PostgreSQL: a pg_dump archive (custom format, one
            snapshot; restore with pg_restore into an empty database), pg_dump must be installed
+  replay   every raw segment inserted again, in the order its row was created, into one object
+           database in memory (parameters: the first session's stored ones, --config on top),
+           and the result compared with the store: models as sets of segments, and the number
+           of merges. Several servers on one database take one writer lock per insert and
+           create a segment's row under it, so when every segment was inserted once (no
+           re-extraction or withdrawal, e.g. sessions extracted only at their end) both must be
+           the same: the result of one server running the inserts in that order. Exit status 1
+           when they differ (each model held by one side only is listed)
 )";
 
 constexpr const char* kCommand = "db";
@@ -182,6 +192,34 @@ StatusOr<Params> sessionParams(const storage::Store& store, const std::string& s
   return params;
 }
 
+int replay(const storage::Store& store, const std::string& config) {
+  const auto sessions = store.sessions();
+  if (!sessions.ok()) return cli::reportError(kCommand, sessions.status());
+  if (sessions->empty()) {
+    return cli::reportError(kCommand, absl::FailedPreconditionError(absl::StrFormat(
+                                          "%s holds no session: nothing to replay",
+                                          store.describe())));
+  }
+  std::string origin;
+  const auto params = sessionParams(store, sessions->front().name, config, &origin);
+  if (!params.ok()) return cli::reportError(kCommand, params.status());
+  const auto start = std::chrono::steady_clock::now();
+  const auto report = cli::replayInCreationOrder(store, *params);
+  if (!report.ok()) return cli::reportError(kCommand, report.status());
+  std::printf("replayed %zu segments in the order their rows were created, through one database in "
+              "memory (%s), in %.1f s\n",
+              report->segments, origin.c_str(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  std::printf("  models: %zu stored, %zu replayed; merges: %zu stored, %zu replayed\n",
+              report->models_stored, report->models_replayed, report->merges_stored,
+              report->merges_replayed);
+  for (const auto& m : report->only_stored) std::printf("  only in the store: {%s}\n", m.c_str());
+  for (const auto& m : report->only_replayed) std::printf("  only in the replay: {%s}\n", m.c_str());
+  std::printf("  %s\n", report->same() ? "the same: every model holds the same segments"
+                                        : "DIFFERENT");
+  return report->same() ? 0 : 1;
+}
+
 int complete(const storage::Store& store, const std::string& session, const std::string& out,
              const std::string& config, double min_weight) {
   std::string origin;
@@ -250,7 +288,7 @@ int runDbCommand(int argc, char** argv) {
     return 0;
   }
   if (action != "check" && action != "stats" && action != "models" && action != "export" &&
-      action != "complete" && action != "backup") {
+      action != "complete" && action != "backup" && action != "replay") {
     return cli::usageError(kCommand, "unknown action \"" + action + "\"", kUsage);
   }
   std::string db, out, what = "cloud", session, config;
@@ -316,6 +354,7 @@ int runDbCommand(int argc, char** argv) {
   if (action == "models") return models(**store);
   if (action == "complete") return complete(**store, session, out, config, min_weight);
   if (action == "backup") return backup(**store, out);
+  if (action == "replay") return replay(**store, config);
   return exportModel(**store, model_id, out, what, min_weight < 0.0 ? 3.0f : float(min_weight));
 }
 

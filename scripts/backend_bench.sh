@@ -8,10 +8,7 @@
 # missing); each repeat runs both backends, in alternating order.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-
-BUILD_DIR=${BUILD_DIR:-build}
-OBJDB="$BUILD_DIR/bin/objdb"
-SERVER="$BUILD_DIR/bin/objdb-server"
+source scripts/server_address.sh  # OBJDB, SERVER, wait_for_address
 DATASET=${1:-data/lounge}
 REPEATS=${REPEATS:-2}
 [[ -x $OBJDB && -x $SERVER ]] || { echo "build first: scripts/build.sh" >&2; exit 1; }
@@ -42,13 +39,7 @@ run() {
   local db=$1 log="$work/server.log" address=""
   "$SERVER" --listen 127.0.0.1:0 --db "$db" >"$log" 2>&1 &
   SERVER_PID=$!
-  for _ in $(seq 1 600); do
-    address=$(sed -n 's/.*listening on \([0-9.]*:[0-9]*\).*/\1/p' "$log" | head -n 1)
-    [[ -n $address ]] && break
-    kill -0 "$SERVER_PID" 2>/dev/null || { cat "$log" >&2; exit 1; }
-    sleep 0.1
-  done
-  [[ -n $address ]] || { echo "objdb-server did not start" >&2; cat "$log" >&2; exit 1; }
+  address=$(wait_for_address "$SERVER_PID" "$log") || exit 1
   local start end
   start=$(date +%s.%N)
   "$OBJDB" stream --server "$address" "$DATASET" >"$work/stream.log" 2>&1 ||

@@ -207,6 +207,14 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::answerOffThread(
   return reactor;
 }
 
+grpc::ServerUnaryReactor* ObjectDatabaseService::answerAuthorized(
+    grpc::CallbackServerContext* context, std::function<Status()> work) {
+  if (const Status allowed = authorize(context, options_.token); !allowed.ok()) {
+    return finishUnary(context, allowed);
+  }
+  return answerOffThread(context, std::move(work));
+}
+
 void ObjectDatabaseService::startWorker(std::function<void()> work) {
   std::unique_lock lock(mutex_);
   if (stopped_) {  // no call can arrive after stop(); should one, it still gets its answer
@@ -468,14 +476,20 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
     }
     session.flush_extracted = true;
   }
+  if (!session.flush_scene_stored) {
+    // The final map is stored before the last segments go in: servers that insert other
+    // sessions' segments meanwhile verify poses in this session against it (they cannot see this
+    // server's live map), as this server does against its own snapshot.
+    OBJDB_RETURN_IF_ERROR(store_->putScene(
+        session.name, std::make_shared<const tsdf::TsdfLayer>(session.map->tsdf().snapshot()),
+        std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks())));
+    session.flush_scene_stored = true;
+  }
   const size_t flushed = session.flush_jobs.size();
   while (!session.flush_jobs.empty()) {
     OBJDB_RETURN_IF_ERROR(insert(session, nullptr, session.flush_jobs.front()));
     session.flush_jobs.pop_front();
   }
-  OBJDB_RETURN_IF_ERROR(store_->putScene(
-      session.name, std::make_shared<const tsdf::TsdfLayer>(session.map->tsdf().snapshot()),
-      std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks())));
   const int64_t frames = int64_t(session.snapshot().frames_integrated());
   OBJDB_RETURN_IF_ERROR(store_->finishSession(session.name, storage::SessionState::kEnded, frames));
   {

@@ -120,24 +120,20 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // runs the database queue dry. Later calls return at once.
   void stop();
 
-  grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* Ingest(
-      grpc::CallbackServerContext* context) override;
-  grpc::ServerUnaryReactor* EndSession(grpc::CallbackServerContext* context,
-                                       const v1::EndSessionRequest* request,
+  // The calls of objdb.v1.ObjectDatabase.
+  using Context = grpc::CallbackServerContext;
+  grpc::ServerBidiReactor<v1::IngestRequest, v1::IngestResponse>* Ingest(Context* context) override;
+  grpc::ServerUnaryReactor* EndSession(Context* context, const v1::EndSessionRequest* request,
                                        v1::EndSessionResponse* response) override;
-  grpc::ServerUnaryReactor* ListSessions(grpc::CallbackServerContext* context,
-                                         const v1::ListSessionsRequest* request,
+  grpc::ServerUnaryReactor* ListSessions(Context* context, const v1::ListSessionsRequest* request,
                                          v1::ListSessionsResponse* response) override;
-  grpc::ServerUnaryReactor* ListObjects(grpc::CallbackServerContext* context,
-                                        const v1::ListObjectsRequest* request,
+  grpc::ServerUnaryReactor* ListObjects(Context* context, const v1::ListObjectsRequest* request,
                                         v1::ListObjectsResponse* response) override;
-  grpc::ServerUnaryReactor* GetObject(grpc::CallbackServerContext* context,
-                                      const v1::GetObjectRequest* request,
+  grpc::ServerUnaryReactor* GetObject(Context* context, const v1::GetObjectRequest* request,
                                       v1::ObjectDetail* response) override;
   grpc::ServerWriteReactor<v1::MeshChunk>* GetSceneMesh(
-      grpc::CallbackServerContext* context, const v1::GetSceneMeshRequest* request) override;
-  grpc::ServerUnaryReactor* GetStats(grpc::CallbackServerContext* context,
-                                     const v1::GetStatsRequest* request,
+      Context* context, const v1::GetSceneMeshRequest* request) override;
+  grpc::ServerUnaryReactor* GetStats(Context* context, const v1::GetStatsRequest* request,
                                      v1::GetStatsResponse* response) override;
 
  private:
@@ -161,6 +157,9 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // its status; a full or stopped pool answers at once.
   grpc::ServerUnaryReactor* answerOffThread(grpc::CallbackServerContext* context,
                                             std::function<Status()> work);
+  // answerOffThread for a call that authorize() lets in (others are answered at once).
+  grpc::ServerUnaryReactor* answerAuthorized(grpc::CallbackServerContext* context,
+                                             std::function<Status()> work);
   void runStream(std::shared_ptr<IngestStream> stream);
   // The frame worker is done with the session's map: hands EndSession jobs that waited for it to
   // the database queue; an interrupted session is stored as such (on the database thread).

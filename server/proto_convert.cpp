@@ -254,14 +254,42 @@ std::vector<Rgb8> colorsOf(const std::string& bytes, size_t n) {
   return out;
 }
 
+// Mesh vertices or cloud points with their normals and colours, from their proto fields (normals
+// or colours of another count are dropped) and to them (those only with one per point).
+void pointsFromProto(const google::protobuf::RepeatedField<float>& points,
+                     const google::protobuf::RepeatedField<float>& normals,
+                     const std::string& colors, std::vector<Eigen::Vector3f>* out_points,
+                     std::vector<Eigen::Vector3f>* out_normals, std::vector<Rgb8>* out_colors) {
+  *out_points = vectorsOf(points);
+  *out_normals = vectorsOf(normals);
+  if (out_normals->size() != out_points->size()) out_normals->clear();
+  *out_colors = colorsOf(colors, out_points->size());
+}
+
+void pointsToProto(const std::vector<Eigen::Vector3f>& points,
+                   const std::vector<Eigen::Vector3f>& normals, const std::vector<Rgb8>& colors,
+                   google::protobuf::RepeatedField<float>* out_points,
+                   google::protobuf::RepeatedField<float>* out_normals, std::string* out_colors) {
+  const auto add = [](const std::vector<Eigen::Vector3f>& vectors,
+                      google::protobuf::RepeatedField<float>* out) {
+    out->Reserve(int(vectors.size() * 3));
+    for (const auto& v : vectors) {
+      for (int k = 0; k < 3; ++k) out->Add(v[k]);
+    }
+  };
+  add(points, out_points);
+  if (normals.size() == points.size()) add(normals, out_normals);
+  if (colors.size() == points.size() && !colors.empty()) {
+    out_colors->assign(reinterpret_cast<const char*>(colors.data()), colors.size() * 3);
+  }
+}
+
 }  // namespace
 
 TriangleMesh meshFromProto(const v1::Mesh& mesh) {
   TriangleMesh out;
-  out.vertices = vectorsOf(mesh.vertices());
-  out.normals = vectorsOf(mesh.normals());
-  if (out.normals.size() != out.vertices.size()) out.normals.clear();
-  out.colors = colorsOf(mesh.colors(), out.vertices.size());
+  pointsFromProto(mesh.vertices(), mesh.normals(), mesh.colors(), &out.vertices, &out.normals,
+                  &out.colors);
   for (int i = 0; i + 2 < mesh.triangles_size(); i += 3) {
     out.triangles.emplace_back(int(mesh.triangles(i)), int(mesh.triangles(i + 1)),
                                int(mesh.triangles(i + 2)));
@@ -271,29 +299,15 @@ TriangleMesh meshFromProto(const v1::Mesh& mesh) {
 
 PointCloud cloudFromProto(const v1::PointCloud& cloud) {
   PointCloud out;
-  out.points = vectorsOf(cloud.points());
-  out.normals = vectorsOf(cloud.normals());
-  if (out.normals.size() != out.points.size()) out.normals.clear();
-  out.colors = colorsOf(cloud.colors(), out.points.size());
+  pointsFromProto(cloud.points(), cloud.normals(), cloud.colors(), &out.points, &out.normals,
+                  &out.colors);
   return out;
 }
 
 void toProto(const TriangleMesh& mesh, v1::Mesh* out) {
   out->Clear();
-  out->mutable_vertices()->Reserve(int(mesh.vertices.size() * 3));
-  for (const auto& v : mesh.vertices) {
-    for (int k = 0; k < 3; ++k) out->add_vertices(v[k]);
-  }
-  if (mesh.normals.size() == mesh.vertices.size()) {
-    out->mutable_normals()->Reserve(int(mesh.normals.size() * 3));
-    for (const auto& n : mesh.normals) {
-      for (int k = 0; k < 3; ++k) out->add_normals(n[k]);
-    }
-  }
-  if (mesh.colors.size() == mesh.vertices.size() && !mesh.colors.empty()) {
-    out->mutable_colors()->assign(reinterpret_cast<const char*>(mesh.colors.data()),
-                                  mesh.colors.size() * 3);
-  }
+  pointsToProto(mesh.vertices, mesh.normals, mesh.colors, out->mutable_vertices(),
+                out->mutable_normals(), out->mutable_colors());
   out->mutable_triangles()->Reserve(int(mesh.triangles.size() * 3));
   for (const auto& t : mesh.triangles) {
     for (int k = 0; k < 3; ++k) out->add_triangles(uint32_t(t[k]));
@@ -302,18 +316,8 @@ void toProto(const TriangleMesh& mesh, v1::Mesh* out) {
 
 void toProto(const PointCloud& cloud, v1::PointCloud* out) {
   out->Clear();
-  for (const auto& p : cloud.points) {
-    for (int k = 0; k < 3; ++k) out->add_points(p[k]);
-  }
-  if (cloud.normals.size() == cloud.points.size()) {
-    for (const auto& n : cloud.normals) {
-      for (int k = 0; k < 3; ++k) out->add_normals(n[k]);
-    }
-  }
-  if (cloud.colors.size() == cloud.points.size() && !cloud.colors.empty()) {
-    out->mutable_colors()->assign(reinterpret_cast<const char*>(cloud.colors.data()),
-                                  cloud.colors.size() * 3);
-  }
+  pointsToProto(cloud.points, cloud.normals, cloud.colors, out->mutable_points(),
+                out->mutable_normals(), out->mutable_colors());
 }
 
 std::vector<TriangleMesh> splitMesh(const TriangleMesh& mesh, size_t max_bytes) {

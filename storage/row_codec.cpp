@@ -26,6 +26,40 @@ StatusOr<std::vector<uint32_t>> parseParts(const std::string& text) {
   return parts;
 }
 
+SessionInfo readSession(const Row& row) {
+  return {.id = row.integer(0), .name = row.text(1), .intrinsics_json = row.text(2),
+          .params_json = row.text(3), .started_at = row.text(4), .ended_at = row.text(5),
+          .state = sessionStateFromName(row.text(6)), .frames = row.integer(7)};
+}
+
+ModelSummary readModelSummary(const Row& row) {
+  return {.id = row.integer(0), .state = row.text(1), .merged_into = row.integer(2),
+          .planar = row.integer(3) != 0, .structure = row.integer(14) != 0,
+          .num_points = row.integer(4), .num_keypoints = row.integer(5), .voxel_size = row.real(6),
+          .bbox_min = Eigen::Vector3d(row.real(7), row.real(8), row.real(9)),
+          .bbox_max = Eigen::Vector3d(row.real(10), row.real(11), row.real(12)),
+          .observations = {}, .merges = row.integer(13)};
+}
+
+StatusOr<database::MergeRecord> readMergeRecord(const Row& row) {
+  auto T = decodeTransform(row.bytes(3));
+  if (!T.ok()) return inRow(T.status(), "merge_records", row.integer(0), "transform");
+  return database::MergeRecord{.target = row.integer(1), .source = row.text(2),
+                               .T_target_source = *T, .icp_rmse_m = row.real(4),
+                               .tsdf_rmse_m = row.real(5), .tsdf_overlap = size_t(row.integer(6)),
+                               .scene_checks = size_t(row.integer(7))};
+}
+
+Status readMatchEntry(const Row& row, database::MatchEntry* entry) {
+  *entry = {.id = row.integer(0), .planar = row.integer(1) != 0, .structure = row.integer(5) != 0,
+            .num_points = size_t(row.integer(2)), .num_keypoints = size_t(row.integer(3)),
+            .descriptors = {}, .segments = {}};
+  auto descriptors = decodeDescriptors(row.bytes(4));
+  if (!descriptors.ok()) return inRow(descriptors.status(), "models", entry->id, "descriptors");
+  entry->descriptors = std::move(*descriptors);
+  return absl::OkStatus();
+}
+
 EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options) {
   EncodedModel e;
   e.planar = m.planar;
@@ -54,6 +88,13 @@ EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options
   return e;
 }
 
+ModelColumns readModelColumns(const Row& row) {
+  return {.planar = row.integer(0) != 0, .structure = row.integer(20) != 0,
+          .plane_inlier_ratio = row.real(1), .grid = row.bytes(11), .surface_voxels = row.bytes(12),
+          .cloud = row.bytes(13), .keypoints = row.bytes(14), .descriptors = row.bytes(15),
+          .timings = {row.real(16), row.real(17), row.real(18), row.real(19)}};
+}
+
 StatusOr<model::ObjectModel> decodeModel(int64_t id, const ModelColumns& c) {
   auto grid = decodeTsdfGrid(c.grid);
   if (!grid.ok()) return inRow(grid.status(), "models", id, "grid");
@@ -62,18 +103,17 @@ StatusOr<model::ObjectModel> decodeModel(int64_t id, const ModelColumns& c) {
   m.planar = c.planar;
   m.structure = c.structure;
   m.plane_inlier_ratio = float(c.plane_inlier_ratio);
-  auto voxels = decodeVoxelList(c.surface_voxels);
-  if (!voxels.ok()) return inRow(voxels.status(), "models", id, "surface_voxels");
-  m.surface_voxels = std::move(*voxels);
-  auto cloud = decodePointCloud(c.cloud);
-  if (!cloud.ok()) return inRow(cloud.status(), "models", id, "cloud");
-  m.cloud = std::move(*cloud);
-  auto keypoints = decodeIndices(c.keypoints);
-  if (!keypoints.ok()) return inRow(keypoints.status(), "models", id, "keypoints");
-  m.keypoint_indices = std::move(*keypoints);
-  auto descriptors = decodeDescriptors(c.descriptors);
-  if (!descriptors.ok()) return inRow(descriptors.status(), "models", id, "descriptors");
-  m.descriptors = std::move(*descriptors);
+  // Each blob into its member, in column order; the first damaged one fails the model.
+  const auto take = [id](auto decoded, const char* column, auto* member) -> Status {
+    if (!decoded.ok()) return inRow(decoded.status(), "models", id, column);
+    *member = std::move(*decoded);
+    return absl::OkStatus();
+  };
+  OBJDB_RETURN_IF_ERROR(
+      take(decodeVoxelList(c.surface_voxels), "surface_voxels", &m.surface_voxels));
+  OBJDB_RETURN_IF_ERROR(take(decodePointCloud(c.cloud), "cloud", &m.cloud));
+  OBJDB_RETURN_IF_ERROR(take(decodeIndices(c.keypoints), "keypoints", &m.keypoint_indices));
+  OBJDB_RETURN_IF_ERROR(take(decodeDescriptors(c.descriptors), "descriptors", &m.descriptors));
   m.timings = c.timings;
   const std::string where = absl::StrFormat("object model %d", id);
   for (uint32_t k : m.keypoint_indices) {
@@ -120,6 +160,13 @@ StatusOr<EncodedRawSegment> encodeRawSegment(const database::RawSegmentRecord& s
   if (!segment.voxel_parts.empty()) e.voxel_parts = encodeIndices(segment.voxel_parts, options);
   e.parts = formatParts(segment.parts);
   return e;
+}
+
+RawSegmentColumns readRawSegmentColumns(const Row& row) {
+  return {.row = row.integer(0), .pose = row.bytes(1), .grid = row.bytes(2), .voxels = row.bytes(3),
+          .extraction_frame = row.integer(4), .observation_depth_m = row.real(5),
+          .parts = row.text(6),
+          .voxel_parts = row.isNull(7) ? std::nullopt : std::optional(row.bytes(7))};
 }
 
 StatusOr<std::shared_ptr<const database::RawSegmentRecord>> decodeRawSegment(

@@ -1,8 +1,9 @@
 // What both backends of storage::Store do the same way with a row's values (storage/sqlite/,
-// storage/postgres/): a model encoded into its columns outside any lock, a model and a raw segment
-// decoded from their columns with every cross-check, a map encoded into per-block blobs, the
-// parts list, the blob columns the full check decodes, row-annotated errors, and the bounded
-// cache of decoded scene maps.
+// storage/postgres/): result rows read into sessions, model summaries, merge records and match
+// entries, a model encoded into its columns outside any lock, a model and a raw segment decoded
+// from their columns with every cross-check, a map encoded into per-block blobs, the parts list,
+// the blob columns the full check decodes, row-annotated errors, and the bounded cache of decoded
+// scene maps.
 #pragma once
 
 #include <cstdint>
@@ -22,6 +23,7 @@
 #include "core/model/object_model.h"
 #include "core/tsdf/tsdf_layer.h"
 #include "storage/blob_codec.h"
+#include "storage/store.h"
 
 namespace objdb::storage {
 
@@ -47,6 +49,44 @@ struct StatsTable {
   const char* blob_bytes;
 };
 const std::vector<StatsTable>& statsTables();
+
+// One result row of either engine (SqliteStore: a statement's current row; PostgresStore: a row
+// of a result), read by column (0-based) by the readers below. A view from bytes() is valid while
+// the row is.
+class Row {
+ public:
+  virtual bool isNull(int column) const = 0;
+  virtual int64_t integer(int column) const = 0;  // booleans 0 or 1; NULL 0
+  virtual double real(int column) const = 0;
+  virtual std::string text(int column) const = 0;
+  virtual std::string_view bytes(int column) const = 0;
+
+ protected:
+  ~Row() = default;
+};
+
+// Rows of both engines' queries, each read from the columns its SELECT list names (the same SQL
+// in both engines).
+inline constexpr const char* kSessionColumns =
+    "id, name, intrinsics, params, started_at, COALESCE(ended_at, ''), state, frames";
+SessionInfo readSession(const Row& row);
+// Of models m; without observations.
+inline constexpr const char* kModelSummaryColumns =
+    "m.id, m.state, COALESCE(m.merged_into, 0), m.planar, m.num_points, m.num_keypoints, "
+    "COALESCE(m.voxel_size, 0), COALESCE(m.bbox_min_x, 0), COALESCE(m.bbox_min_y, 0), "
+    "COALESCE(m.bbox_min_z, 0), COALESCE(m.bbox_max_x, 0), COALESCE(m.bbox_max_y, 0), "
+    "COALESCE(m.bbox_max_z, 0), (SELECT COUNT(*) FROM merge_records r WHERE r.target = m.id), "
+    "m.structure";
+ModelSummary readModelSummary(const Row& row);
+// DATA_LOSS for a damaged transform.
+inline constexpr const char* kMergeRecordColumns =
+    "id, target, source, transform, icp_rmse_m, tsdf_rmse_m, tsdf_overlap, scene_checks";
+StatusOr<database::MergeRecord> readMergeRecord(const Row& row);
+// Without segments. DATA_LOSS naming the row for damaged descriptors (`entry->id` is set then
+// too).
+inline constexpr const char* kMatchEntryColumns =
+    "id, planar, num_points, num_keypoints, descriptors, structure";
+Status readMatchEntry(const Row& row, database::MatchEntry* entry);
 
 // A model's columns (the models row and its observation rows), encoded.
 struct EncodedModel {
@@ -74,6 +114,8 @@ struct ModelColumns {
   std::string_view grid, surface_voxels, cloud, keypoints, descriptors;
   model::BuildTimings timings;
 };
+// The columns of a row of kModelColumns.
+ModelColumns readModelColumns(const Row& row);
 // Model `id` from its columns (without observations); DATA_LOSS naming the column of a damaged
 // blob, or keypoints and descriptors that do not fit the cloud.
 StatusOr<model::ObjectModel> decodeModel(int64_t id, const ModelColumns& columns);
@@ -106,6 +148,11 @@ struct RawSegmentColumns {
   std::string parts;
   std::optional<std::string_view> voxel_parts;
 };
+// The columns of a row of kRawSegmentColumns (of raw_segments r).
+inline constexpr const char* kRawSegmentColumns =
+    "r.id, r.pose, r.grid, r.voxels, r.extraction_frame, r.observation_depth_m, r.parts, "
+    "r.voxel_parts";
+RawSegmentColumns readRawSegmentColumns(const Row& row);
 StatusOr<std::shared_ptr<const database::RawSegmentRecord>> decodeRawSegment(
     const database::SegmentKey& key, const RawSegmentColumns& columns);
 

@@ -2,6 +2,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "absl/strings/str_format.h"
+
 namespace objdb::storage {
 
 const char* sessionStateName(SessionState state) {
@@ -24,6 +26,12 @@ std::string intrinsicsJson(const Intrinsics& intrinsics) {
                         {"fx", intrinsics.fx},       {"fy", intrinsics.fy},
                         {"cx", intrinsics.cx},       {"cy", intrinsics.cy}}
       .dump();
+}
+
+Status checkOptionRange(std::string_view name, int64_t value, int64_t min, int64_t max) {
+  if (value >= min && value <= max) return absl::OkStatus();
+  return absl::InvalidArgumentError(
+      absl::StrFormat("storage.%s must be in [%d, %d], got %d", name, min, max, value));
 }
 
 }  // namespace objdb::storage

@@ -17,6 +17,7 @@
 #include "core/common/status.h"
 #include "core/common/transform.h"
 #include "core/database/model_store.h"
+#include "storage/blob_codec.h"
 
 namespace objdb::storage {
 
@@ -120,6 +121,18 @@ struct ModelQuery {
   bool include_structure = true;  // false: only models not flagged room structure
 };
 
+// What the options of every backend have (SqliteStoreOptions, PostgresStoreOptions).
+struct BackendOptions {
+  // Decoded scene maps kept in memory (the most recently used; each a session's TSDF and labels,
+  // ~0.05-0.1 GB for a room at 2 cm). Older ones are decoded again from the database when needed.
+  int max_cached_scenes = 8;
+  BlobOptions blobs;  // compression of new blobs
+};
+
+// For the options' validate(): INVALID_ARGUMENT "storage.<name> must be in [min, max], got
+// <value>" unless min <= value <= max.
+Status checkOptionRange(std::string_view name, int64_t value, int64_t min, int64_t max);
+
 // Everything the server asks of its database. Every mutation is one transaction; every read of
 // several rows sees one snapshot. Thread-safe.
 class Store : public database::ModelStore {
@@ -149,6 +162,9 @@ class Store : public database::ModelStore {
   virtual StatusOr<ModelFate> modelFate(int64_t id) const = 0;
   // The id of a stored raw segment (NOT_FOUND when none has that key).
   virtual StatusOr<int64_t> rawSegmentId(const database::SegmentKey& key) const = 0;
+  // Every raw segment's key, in the order the rows were created (ascending id). A re-extraction
+  // updates its row in place and keeps its place.
+  virtual StatusOr<std::vector<database::SegmentKey>> rawSegmentKeys() const = 0;
 
   // Sessions. beginSession creates the session (ALREADY_EXISTS when the name is taken);
   // a session row is also created implicitly, state open, by the first data stored for it.

@@ -14,6 +14,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/common/params.h"
@@ -73,23 +74,26 @@ struct InsertTimings {
   // across writers, in total_ms: everything but the segment's own model, built before the lock).
   double writer_wait_ms = 0, writer_hold_ms = 0;
 
-  InsertTimings& operator+=(const InsertTimings& o) {
-    cloud_ms += o.cloud_ms;
-    keypoints_ms += o.keypoints_ms;
-    descriptors_ms += o.descriptors_ms;
-    match_register_ms += o.match_register_ms;
-    model_verify_ms += o.model_verify_ms;
-    scene_verify_ms += o.scene_verify_ms;
-    total_ms += o.total_ms;
-    replace_ms += o.replace_ms;
-    prefilter_ms += o.prefilter_ms;
-    load_ms += o.load_ms;
-    store_ms += o.store_ms;
-    writer_wait_ms += o.writer_wait_ms;
-    writer_hold_ms += o.writer_hold_ms;
-    return *this;
-  }
+  InsertTimings& operator+=(const InsertTimings& o);
 };
+
+// Every field of InsertTimings with its stage's name (the API's InsertTimingTotals has a field
+// <name>_s for each).
+inline constexpr std::pair<const char*, double InsertTimings::*> kInsertStages[] = {
+    {"cloud", &InsertTimings::cloud_ms},          {"keypoints", &InsertTimings::keypoints_ms},
+    {"descriptors", &InsertTimings::descriptors_ms},
+    {"match_register", &InsertTimings::match_register_ms},
+    {"model_verify", &InsertTimings::model_verify_ms},
+    {"scene_verify", &InsertTimings::scene_verify_ms}, {"total", &InsertTimings::total_ms},
+    {"replace", &InsertTimings::replace_ms},      {"prefilter", &InsertTimings::prefilter_ms},
+    {"load", &InsertTimings::load_ms},            {"store", &InsertTimings::store_ms},
+    {"writer_wait", &InsertTimings::writer_wait_ms},
+    {"writer_hold", &InsertTimings::writer_hold_ms}};
+
+inline InsertTimings& InsertTimings::operator+=(const InsertTimings& o) {
+  for (const auto& [name, member] : kInsertStages) this->*member += o.*member;
+  return *this;
+}
 
 struct InsertReport {
   // The segment cannot be a model (model::SegmentModel: no surface at the mesh weight): it is

@@ -62,6 +62,7 @@ struct LiveSession {
   // EndSession's segments (the database thread's): extracted once, inserted front first, so a
   // failed flush can be retried without losing any.
   bool flush_extracted = false;
+  bool flush_scene_stored = false;  // the final map is stored (before the flush's inserts)
   std::deque<RawSegmentJob> flush_jobs;
 
   std::mutex mutex;  // guards what follows

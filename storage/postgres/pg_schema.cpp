@@ -1,146 +1,38 @@
 #include "storage/postgres/pg_schema.h"
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/common/logging.h"
 
 namespace objdb::storage::pg {
 namespace {
 
+// PostgreSQL's words for the shared tables (storage/shared_schema.h): ids come from identity
+// columns, never reused; block and observation rows have an id of their own, for messages.
+constexpr SqlDialect kDialect{"BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY",
+                              "BIGINT",
+                              "DOUBLE PRECISION",
+                              "BYTEA",
+                              "BOOLEAN",
+                              "FALSE",
+                              "  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,\n"};
+
 // Version 1: the data model of the SQLite store's schema 5 (storage/sqlite/schema.cpp), in
-// PostgreSQL's types. Binary columns are bytea blobs of storage/blob_codec.h. Ids come from
-// identity columns, never reused. Block rows have an id of their own, for messages.
-constexpr const char* kSchemaV1 = R"sql(
+// PostgreSQL's types, and the table that names the application and the schema version.
+std::string schemaV1() {
+  return absl::StrCat(R"sql(
 CREATE TABLE objdb_meta (
   key TEXT PRIMARY KEY,
   value TEXT NOT NULL
 );
-CREATE TABLE sessions (
-  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
-  name TEXT NOT NULL UNIQUE,
-  intrinsics TEXT NOT NULL DEFAULT '',
-  params TEXT NOT NULL DEFAULT '',
-  started_at TEXT NOT NULL,
-  ended_at TEXT,
-  state TEXT NOT NULL CHECK (state IN ('open', 'ended', 'interrupted')),
-  frames BIGINT NOT NULL DEFAULT 0
-);
-CREATE TABLE scene_maps (
-  session_id BIGINT PRIMARY KEY REFERENCES sessions(id),
-  voxel_size DOUBLE PRECISION NOT NULL,
-  voxels_per_side BIGINT NOT NULL,
-  blocks BIGINT NOT NULL,
-  updated_at TEXT NOT NULL
-);
-CREATE TABLE scene_blocks (
-  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-  session_id BIGINT NOT NULL REFERENCES scene_maps(session_id) ON DELETE CASCADE,
-  bx INTEGER NOT NULL,
-  by INTEGER NOT NULL,
-  bz INTEGER NOT NULL,
-  tsdf BYTEA NOT NULL,
-  PRIMARY KEY (session_id, bx, by, bz)
-);
-CREATE TABLE scene_label_blocks (
-  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-  session_id BIGINT NOT NULL REFERENCES scene_maps(session_id) ON DELETE CASCADE,
-  bx INTEGER NOT NULL,
-  by INTEGER NOT NULL,
-  bz INTEGER NOT NULL,
-  labels BYTEA NOT NULL,
-  PRIMARY KEY (session_id, bx, by, bz)
-);
-CREATE TABLE saved_maps (
-  session_id BIGINT PRIMARY KEY REFERENCES sessions(id),
-  voxel_size DOUBLE PRECISION NOT NULL,
-  voxels_per_side BIGINT NOT NULL,
-  blocks BIGINT NOT NULL,
-  frames BIGINT NOT NULL DEFAULT 0,
-  updated_at TEXT NOT NULL
-);
-CREATE TABLE saved_blocks (
-  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-  session_id BIGINT NOT NULL REFERENCES saved_maps(session_id) ON DELETE CASCADE,
-  bx INTEGER NOT NULL,
-  by INTEGER NOT NULL,
-  bz INTEGER NOT NULL,
-  tsdf BYTEA NOT NULL,
-  PRIMARY KEY (session_id, bx, by, bz)
-);
-CREATE TABLE saved_label_blocks (
-  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-  session_id BIGINT NOT NULL REFERENCES saved_maps(session_id) ON DELETE CASCADE,
-  bx INTEGER NOT NULL,
-  by INTEGER NOT NULL,
-  bz INTEGER NOT NULL,
-  labels BYTEA NOT NULL,
-  PRIMARY KEY (session_id, bx, by, bz)
-);
-CREATE TABLE raw_segments (
-  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
-  session_id BIGINT NOT NULL REFERENCES sessions(id),
-  label BIGINT NOT NULL,
-  pose BYTEA NOT NULL,
-  grid BYTEA NOT NULL,
-  voxels BYTEA NOT NULL,
-  extraction_frame BIGINT NOT NULL,
-  observation_depth_m DOUBLE PRECISION NOT NULL DEFAULT 0,
-  parts TEXT NOT NULL DEFAULT '',
-  voxel_parts BYTEA,
-  extracted_at TEXT NOT NULL,
-  UNIQUE (session_id, label)
-);
-CREATE TABLE models (
-  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
-  state TEXT NOT NULL CHECK (state IN ('active', 'merged', 'removed')),
-  merged_into BIGINT REFERENCES models(id),
-  planar BOOLEAN NOT NULL,
-  structure BOOLEAN NOT NULL DEFAULT FALSE,
-  plane_inlier_ratio DOUBLE PRECISION NOT NULL,
-  num_points BIGINT NOT NULL,
-  num_keypoints BIGINT NOT NULL,
-  voxel_size DOUBLE PRECISION,
-  bbox_min_x DOUBLE PRECISION, bbox_min_y DOUBLE PRECISION, bbox_min_z DOUBLE PRECISION,
-  bbox_max_x DOUBLE PRECISION, bbox_max_y DOUBLE PRECISION, bbox_max_z DOUBLE PRECISION,
-  grid BYTEA,
-  surface_voxels BYTEA,
-  cloud BYTEA,
-  keypoints BYTEA,
-  descriptors BYTEA,
-  cloud_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
-  planarity_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
-  keypoints_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
-  descriptors_ms DOUBLE PRECISION NOT NULL DEFAULT 0,
-  created_at TEXT NOT NULL,
-  updated_at TEXT NOT NULL
-);
-CREATE INDEX models_by_state ON models(state);
-CREATE TABLE observations (
-  id BIGINT GENERATED ALWAYS AS IDENTITY UNIQUE,
-  model_id BIGINT NOT NULL REFERENCES models(id),
-  seq BIGINT NOT NULL,
-  session_id BIGINT NOT NULL REFERENCES sessions(id),
-  label BIGINT NOT NULL,
-  raw_segment_id BIGINT REFERENCES raw_segments(id),
-  t_world_object BYTEA NOT NULL,
-  t_object_segment BYTEA NOT NULL,
-  PRIMARY KEY (model_id, seq)
-);
-CREATE INDEX observations_by_segment ON observations(session_id, label);
-CREATE TABLE merge_records (
-  id BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY,
-  target BIGINT NOT NULL REFERENCES models(id),
-  source TEXT NOT NULL,
-  transform BYTEA NOT NULL,
-  icp_rmse_m DOUBLE PRECISION NOT NULL,
-  tsdf_rmse_m DOUBLE PRECISION NOT NULL,
-  tsdf_overlap BIGINT NOT NULL,
-  scene_checks BIGINT NOT NULL,
-  created_at TEXT NOT NULL
-);
-CREATE INDEX merge_records_by_target ON merge_records(target);
-INSERT INTO objdb_meta(key, value) VALUES ('application', 'objdb'), ('schema_version', '0');
-)sql";
+)sql",
+                      sessionsTable(kDialect), mapTables(kDialect, kSceneTables),
+                      mapTables(kDialect, kSavedTables),
+                      segmentAndModelTables(kDialect, /*with_added=*/true),
+                      "INSERT INTO objdb_meta(key, value) VALUES ('application', 'objdb'), "
+                      "('schema_version', '0');\n");
+}
 
 // Version 2: several servers on one database. Session leases (the server streaming or ending a
 // session; expiry by the database's clock, so the servers' clocks do not matter), and a change
@@ -203,7 +95,7 @@ StatusOr<int> recordedVersion(const Connection& c, const std::string& describe) 
 
 const std::vector<Migration>& schemaMigrations() {
   static const std::vector<Migration> migrations = {
-      {1, "sessions, maps, raw segments, models, observations, merge records", kSchemaV1},
+      {1, "sessions, maps, raw segments, models, observations, merge records", schemaV1()},
       {2, "several servers: session leases, the models' change sequence", kSchemaV2},
   };
   return migrations;

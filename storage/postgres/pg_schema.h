@@ -11,22 +11,11 @@
 
 #include "core/common/status.h"
 #include "storage/postgres/pg_util.h"
+#include "storage/shared_schema.h"
 
 namespace objdb::storage::pg {
 
-struct Migration {
-  int version;              // the schema version after this step (1, 2, ...)
-  std::string description;  // one line, shown in logs
-  std::string sql;          // DDL/DML run in the step's transaction
-};
-
 const std::vector<Migration>& schemaMigrations();
-
-struct SchemaState {
-  int version_before = 0;  // 0 for a new database
-  int version_after = 0;
-  bool created = false;
-};
 
 // Brings the database of `connection` to the last of `migrations`. Errors: FAILED_PRECONDITION
 // for a database of another application or a newer schema (nothing written), or the migration's

@@ -2,6 +2,8 @@
 
 #include <endian.h>
 
+#include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cstring>
 #include <random>
@@ -25,6 +27,27 @@ std::string trimmed(const char* message) {
 
 void logNotice(void*, const char* message) {
   logger("storage")->debug("postgres: {}", trimmed(message));
+}
+
+// PostgreSQL's binary format: numbers big-endian.
+std::string bigEndianBytes(uint64_t value) {
+  const uint64_t be = htobe64(value);
+  return std::string(reinterpret_cast<const char*>(&be), sizeof(be));
+}
+
+// The unsigned big-endian number of type U at the start of `v` (zero-filled when shorter).
+template <typename U>
+U fromBigEndian(std::string_view v) {
+  U be = 0;
+  std::memcpy(&be, v.data(), std::min(v.size(), sizeof(be)));
+  if constexpr (sizeof(U) == 8) {
+    return be64toh(be);
+  } else if constexpr (sizeof(U) == 4) {
+    return be32toh(be);
+  } else {
+    static_assert(sizeof(U) == 2);
+    return be16toh(be);
+  }
 }
 
 }  // namespace
@@ -61,16 +84,12 @@ void Params::push(Oid type, std::string value, bool is_null) {
 }
 
 Params& Params::add(int64_t value) {
-  const uint64_t be = htobe64(uint64_t(value));
-  push(kInt8, std::string(reinterpret_cast<const char*>(&be), sizeof(be)), false);
+  push(kInt8, bigEndianBytes(uint64_t(value)), false);
   return *this;
 }
 
 Params& Params::add(double value) {
-  uint64_t bits = 0;
-  std::memcpy(&bits, &value, sizeof(bits));
-  const uint64_t be = htobe64(bits);
-  push(kFloat8, std::string(reinterpret_cast<const char*>(&be), sizeof(be)), false);
+  push(kFloat8, bigEndianBytes(std::bit_cast<uint64_t>(value)), false);
   return *this;
 }
 
@@ -108,21 +127,9 @@ int64_t Result::integer(int row, int column) const {
   if (isNull(row, column)) return 0;
   const std::string_view v = raw(row, column);
   switch (PQftype(result_.get(), column)) {
-    case kInt8: {
-      uint64_t be = 0;
-      std::memcpy(&be, v.data(), std::min(v.size(), sizeof(be)));
-      return int64_t(be64toh(be));
-    }
-    case kInt4: {
-      uint32_t be = 0;
-      std::memcpy(&be, v.data(), std::min(v.size(), sizeof(be)));
-      return int32_t(be32toh(be));
-    }
-    case kInt2: {
-      uint16_t be = 0;
-      std::memcpy(&be, v.data(), std::min(v.size(), sizeof(be)));
-      return int16_t(be16toh(be));
-    }
+    case kInt8: return int64_t(fromBigEndian<uint64_t>(v));
+    case kInt4: return int32_t(fromBigEndian<uint32_t>(v));
+    case kInt2: return int16_t(fromBigEndian<uint16_t>(v));
     case kBool: return v.empty() ? 0 : int64_t(v[0] != 0);
     default: return 0;
   }
@@ -132,22 +139,8 @@ double Result::real(int row, int column) const {
   if (isNull(row, column)) return 0.0;
   const std::string_view v = raw(row, column);
   switch (PQftype(result_.get(), column)) {
-    case kFloat8: {
-      uint64_t be = 0;
-      std::memcpy(&be, v.data(), std::min(v.size(), sizeof(be)));
-      const uint64_t bits = be64toh(be);
-      double out = 0;
-      std::memcpy(&out, &bits, sizeof(out));
-      return out;
-    }
-    case kFloat4: {
-      uint32_t be = 0;
-      std::memcpy(&be, v.data(), std::min(v.size(), sizeof(be)));
-      const uint32_t bits = be32toh(be);
-      float out = 0;
-      std::memcpy(&out, &bits, sizeof(out));
-      return out;
-    }
+    case kFloat8: return std::bit_cast<double>(fromBigEndian<uint64_t>(v));
+    case kFloat4: return std::bit_cast<float>(fromBigEndian<uint32_t>(v));
     default: return double(integer(row, column));
   }
 }

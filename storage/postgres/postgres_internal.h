@@ -1,6 +1,6 @@
 // Private to storage/postgres/: what the files of PostgresStore's implementation share (its
-// connection pool and scene cache, the session row of a write, the map tables). Not included
-// outside storage/postgres/.
+// connection pool and scene cache, the session row of a write, the saved map's deletion). Not
+// included outside storage/postgres/.
 #pragma once
 
 #include <cstdint>
@@ -49,22 +49,24 @@ class PostgresStore::Impl {
 
 namespace pgstore {
 
+// Row `row` of `result`, for the row readers of storage/row_codec.h.
+class ResultRow final : public Row {
+ public:
+  ResultRow(const pg::Result& result, int row) : result_(result), row_(row) {}
+  bool isNull(int c) const override { return result_.isNull(row_, c); }
+  int64_t integer(int c) const override { return result_.integer(row_, c); }
+  double real(int c) const override { return result_.real(row_, c); }
+  std::string text(int c) const override { return result_.text(row_, c); }
+  std::string_view bytes(int c) const override { return result_.bytes(row_, c); }
+
+ private:
+  const pg::Result& result_;
+  const int row_;
+};
+
 // The id of session `name`, created (state open) when it has no row yet; inside the caller's
 // write transaction. INVALID_ARGUMENT for an empty name.
 StatusOr<int64_t> sessionIdForWrite(const pg::Connection& c, const std::string& name);
-
-// The tables of one kind of stored map: a session's scene map, or its saved live map.
-struct MapTables {
-  const char* what;  // in messages: "scene" or "saved map"
-  const char* maps;
-  const char* blocks;
-  const char* label_blocks;
-  bool has_frames;
-};
-inline constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks",
-                                        "scene_label_blocks", false};
-inline constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks",
-                                        "saved_label_blocks", true};
 
 // Deletes the saved map of `session` (inside the caller's write transaction).
 Status deleteSavedMap(const pg::Connection& c, const std::string& session);

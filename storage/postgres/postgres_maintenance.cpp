@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "storage/backup_files.h"
 #include "storage/postgres/postgres_internal.h"
 
 extern char** environ;
@@ -22,9 +23,6 @@ namespace objdb::storage {
 
 using pg::Params;
 using pg::Result;
-using pgstore::kSavedTables;
-using pgstore::kSceneTables;
-using pgstore::MapTables;
 
 StatusOr<CheckReport> PostgresStore::check() const {
   CheckReport report;
@@ -222,29 +220,14 @@ StatusOr<BackupReport> PostgresStore::backupTo(const std::string& path) const {
         absl::StrFormat("backup: pg_dump of %s failed (exit %d): %s", describe(), *rc, why));
   }
   // Durable before it gets its name; link() never replaces a file that appeared meanwhile.
-  const int fd = ::open(partial.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
-  }
+  syncPath(partial);
   BackupReport report;
   report.bytes = int64_t(std::filesystem::file_size(partial, ec));
   const int named = ::link(partial.c_str(), path.c_str());
   const int link_errno = errno;
   std::filesystem::remove(partial, ec);
-  if (named != 0) {
-    return link_errno == EEXIST
-               ? absl::AlreadyExistsError(absl::StrFormat(
-                     "backup: %s appeared while the copy was made; it was left alone", path))
-               : absl::UnavailableError(absl::StrFormat("backup: naming the copy %s: %s", path,
-                                                        std::strerror(link_errno)));
-  }
-  const std::string directory = std::filesystem::path(path).parent_path().string();
-  const int dir_fd = ::open(directory.empty() ? "." : directory.c_str(), O_RDONLY | O_CLOEXEC);
-  if (dir_fd >= 0) {
-    ::fsync(dir_fd);
-    ::close(dir_fd);
-  }
+  if (named != 0) return backupNamingError(path, link_errno);
+  syncDirectoryOf(path);
   return report;
 }
 

@@ -12,9 +12,6 @@ namespace objdb::storage {
 
 using pg::Params;
 using pg::Result;
-using pgstore::kSavedTables;
-using pgstore::kSceneTables;
-using pgstore::MapTables;
 
 namespace {
 

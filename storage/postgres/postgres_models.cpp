@@ -40,6 +40,18 @@ std::string placeholders(int first, int n) {
   return out;
 }
 
+// Calls `add(row, slot)` for each row of `rows` whose model (the id in column `id_column`) has a
+// slot in `slots`, until an error; the rows of other models are passed over.
+template <typename Add>
+Status forRowsOfModels(const Result& rows, int id_column, const std::map<int64_t, size_t>& slots,
+                       Add add) {
+  for (int row = 0; row < rows.rows(); ++row) {
+    const auto it = slots.find(rows.integer(row, id_column));
+    if (it != slots.end()) OBJDB_RETURN_IF_ERROR(add(row, it->second));
+  }
+  return absl::OkStatus();
+}
+
 // The observation rows of model `model_id` (replacing its earlier ones when `replace`), inside
 // the caller's write transaction.
 Status writeObservations(const pg::Connection& c, int64_t model_id, const EncodedModel& model,
@@ -238,17 +250,8 @@ StatusOr<std::shared_ptr<const model::ObjectModel>> PostgresStore::model(int64_t
                                          kModelColumns),
                          p, context));
     if (s.rows() == 0) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
-    ModelColumns columns;
-    columns.planar = s.boolean(0, 0);
-    columns.plane_inlier_ratio = s.real(0, 1);
-    columns.grid = s.bytes(0, 11);
-    columns.surface_voxels = s.bytes(0, 12);
-    columns.cloud = s.bytes(0, 13);
-    columns.keypoints = s.bytes(0, 14);
-    columns.descriptors = s.bytes(0, 15);
-    columns.timings = {s.real(0, 16), s.real(0, 17), s.real(0, 18), s.real(0, 19)};
-    columns.structure = s.boolean(0, 20);
-    OBJDB_ASSIGN_OR_RETURN(model::ObjectModel m, decodeModel(id, columns));
+    OBJDB_ASSIGN_OR_RETURN(model::ObjectModel m,
+                           decodeModel(id, readModelColumns(pgstore::ResultRow(s, 0))));
     OBJDB_ASSIGN_OR_RETURN(
         Result o, c.exec("SELECT o.id, s.name, o.label, o.t_world_object, o.t_object_segment "
                          "FROM observations o JOIN sessions s ON s.id = o.session_id "
@@ -285,34 +288,14 @@ StatusOr<std::vector<ModelSummary>> PostgresStore::modelSummaries(const ModelQue
     }
     OBJDB_ASSIGN_OR_RETURN(
         Result s,
-        c.exec(absl::StrFormat(
-                   "SELECT m.id, m.state, COALESCE(m.merged_into, 0), m.planar, m.num_points, "
-                   "m.num_keypoints, COALESCE(m.voxel_size, 0), COALESCE(m.bbox_min_x, 0), "
-                   "COALESCE(m.bbox_min_y, 0), COALESCE(m.bbox_min_z, 0), "
-                   "COALESCE(m.bbox_max_x, 0), COALESCE(m.bbox_max_y, 0), "
-                   "COALESCE(m.bbox_max_z, 0), (SELECT COUNT(*) FROM merge_records r WHERE "
-                   "r.target = m.id), m.structure FROM models m WHERE m.id > $1 AND %s "
-                   "ORDER BY m.id LIMIT $2",
-                   where),
+        c.exec(absl::StrFormat("SELECT %s FROM models m WHERE m.id > $1 AND %s ORDER BY m.id "
+                               "LIMIT $2",
+                               kModelSummaryColumns, where),
                p, "listing object models"));
     std::map<int64_t, size_t> slot;
     for (int row = 0; row < s.rows(); ++row) {
-      ModelSummary m;
-      m.id = s.integer(row, 0);
-      m.state = s.text(row, 1);
-      m.merged_into = s.integer(row, 2);
-      m.planar = s.boolean(row, 3);
-      m.num_points = s.integer(row, 4);
-      m.num_keypoints = s.integer(row, 5);
-      m.voxel_size = s.real(row, 6);
-      for (int k = 0; k < 3; ++k) {
-        m.bbox_min[k] = s.real(row, 7 + k);
-        m.bbox_max[k] = s.real(row, 10 + k);
-      }
-      m.merges = s.integer(row, 13);
-      m.structure = s.boolean(row, 14);
-      slot[m.id] = out.size();
-      out.push_back(std::move(m));
+      out.push_back(readModelSummary(pgstore::ResultRow(s, row)));
+      slot[out.back().id] = out.size() - 1;
     }
     if (out.empty()) return absl::OkStatus();
     // One round trip for the page's observations: the id range, then the page's ids.
@@ -326,19 +309,17 @@ StatusOr<std::vector<ModelSummary>> PostgresStore::modelSummaries(const ModelQue
                          "r.id = o.raw_segment_id WHERE o.model_id BETWEEN $1 AND $2 "
                          "ORDER BY o.model_id, o.seq",
                          range, "listing observations"));
-    for (int row = 0; row < o.rows(); ++row) {
-      const auto it = slot.find(o.integer(row, 1));
-      if (it == slot.end()) continue;
+    return forRowsOfModels(o, 1, slot, [&](int row, size_t model) -> Status {
       auto T_wo = decodeTransform(o.bytes(row, 5));
       if (!T_wo.ok()) {
         return inRow(T_wo.status(), "observations", o.integer(row, 0), "t_world_object");
       }
       auto parts = parseParts(o.text(row, 6));
       if (!parts.ok()) return inRow(parts.status(), "raw_segments", o.integer(row, 4), "parts");
-      out[it->second].observations.push_back({o.text(row, 2), uint32_t(o.integer(row, 3)),
-                                              o.integer(row, 4), *T_wo, std::move(*parts)});
-    }
-    return absl::OkStatus();
+      out[model].observations.push_back({o.text(row, 2), uint32_t(o.integer(row, 3)),
+                                         o.integer(row, 4), *T_wo, std::move(*parts)});
+      return absl::OkStatus();
+    });
   }));
   return out;
 }
@@ -372,25 +353,19 @@ Status readMatchEntries(const pg::Connection& c, int64_t since, database::MatchE
                                             p, "reading model changes"));
     for (int row = 0; row < r.rows(); ++row) retired->push_back(r.integer(row, 0));
   }
-  OBJDB_ASSIGN_OR_RETURN(
-      Result s, c.exec("SELECT id, planar, num_points, num_keypoints, descriptors, structure "
-                       "FROM models WHERE state = 'active' AND change_seq >= $1 ORDER BY id",
-                       p, "reading match entries"));
+  OBJDB_ASSIGN_OR_RETURN(Result s,
+                         c.exec(absl::StrFormat("SELECT %s FROM models WHERE state = 'active' AND "
+                                                "change_seq >= $1 ORDER BY id",
+                                                kMatchEntryColumns),
+                                p, "reading match entries"));
   std::map<int64_t, size_t> slot;
   for (int row = 0; row < s.rows(); ++row) {
     database::MatchEntry e;
-    e.id = s.integer(row, 0);
-    e.planar = s.boolean(row, 1);
-    e.structure = s.boolean(row, 5);
-    e.num_points = size_t(s.integer(row, 2));
-    e.num_keypoints = size_t(s.integer(row, 3));
-    auto descriptors = decodeDescriptors(s.bytes(row, 4));
-    if (!descriptors.ok()) {
-      out->skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
+    if (Status read = readMatchEntry(pgstore::ResultRow(s, row), &e); !read.ok()) {
+      out->skipped.push_back(std::move(read));
       if (retired != nullptr) retired->push_back(e.id);  // its earlier entry is stale
       continue;
     }
-    e.descriptors = std::move(*descriptors);
     slot[e.id] = out->entries.size();
     out->entries.push_back(std::move(e));
   }
@@ -400,12 +375,10 @@ Status readMatchEntries(const pg::Connection& c, int64_t since, database::MatchE
                        "m.id = o.model_id WHERE m.state = 'active' AND m.change_seq >= $1 "
                        "ORDER BY o.model_id, o.seq",
                        p, "reading match entries"));
-  for (int row = 0; row < o.rows(); ++row) {
-    const auto it = slot.find(o.integer(row, 0));
-    if (it == slot.end()) continue;
-    out->entries[it->second].segments.push_back({o.text(row, 1), uint32_t(o.integer(row, 2))});
-  }
-  return absl::OkStatus();
+  return forRowsOfModels(o, 0, slot, [&](int row, size_t entry) {
+    out->entries[entry].segments.push_back({o.text(row, 1), uint32_t(o.integer(row, 2))});
+    return absl::OkStatus();
+  });
 }
 
 }  // namespace

@@ -56,21 +56,9 @@ StatusOr<std::vector<SessionInfo>> PostgresStore::sessions() const {
   OBJDB_RETURN_IF_ERROR(impl_->read("listing sessions", [&](const pg::Connection& c) -> Status {
     out.clear();
     OBJDB_ASSIGN_OR_RETURN(
-        Result r, c.exec("SELECT id, name, intrinsics, params, started_at, "
-                         "COALESCE(ended_at, ''), state, frames FROM sessions ORDER BY id",
+        Result r, c.exec(absl::StrFormat("SELECT %s FROM sessions ORDER BY id", kSessionColumns),
                          "listing sessions"));
-    for (int row = 0; row < r.rows(); ++row) {
-      SessionInfo info;
-      info.id = r.integer(row, 0);
-      info.name = r.text(row, 1);
-      info.intrinsics_json = r.text(row, 2);
-      info.params_json = r.text(row, 3);
-      info.started_at = r.text(row, 4);
-      info.ended_at = r.text(row, 5);
-      info.state = sessionStateFromName(r.text(row, 6));
-      info.frames = r.integer(row, 7);
-      out.push_back(std::move(info));
-    }
+    for (int row = 0; row < r.rows(); ++row) out.push_back(readSession(pgstore::ResultRow(r, row)));
     return absl::OkStatus();
   }));
   return out;

@@ -30,23 +30,11 @@ std::string redactPostgresUri(const std::string& uri) {
 }
 
 Status PostgresStoreOptions::validate() const {
-  if (!(pool_size >= 1 && pool_size <= 256)) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("storage.pool_size must be in [1, 256], got %d", pool_size));
-  }
-  if (!(connect_timeout_s >= 1 && connect_timeout_s <= 600)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "storage.connect_timeout_s must be in [1, 600], got %d", connect_timeout_s));
-  }
-  if (!(max_transaction_retries >= 0 && max_transaction_retries <= 1000)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "storage.max_transaction_retries must be in [0, 1000], got %d", max_transaction_retries));
-  }
-  if (!(max_cached_scenes >= 1 && max_cached_scenes <= 1024)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "storage.max_cached_scenes must be in [1, 1024], got %d", max_cached_scenes));
-  }
-  return absl::OkStatus();
+  OBJDB_RETURN_IF_ERROR(checkOptionRange("pool_size", pool_size, 1, 256));
+  OBJDB_RETURN_IF_ERROR(checkOptionRange("connect_timeout_s", connect_timeout_s, 1, 600));
+  OBJDB_RETURN_IF_ERROR(
+      checkOptionRange("max_transaction_retries", max_transaction_retries, 0, 1000));
+  return checkOptionRange("max_cached_scenes", max_cached_scenes, 1, 1024);
 }
 
 PostgresStore::PostgresStore(std::string uri, PostgresStoreOptions options)
@@ -62,7 +50,7 @@ StatusOr<std::unique_ptr<PostgresStore>> PostgresStore::open(const std::string& 
   store->impl_ = std::make_unique<Impl>(uri, describe, options);
   {
     OBJDB_ASSIGN_OR_RETURN(pg::ConnectionPool::Lease lease, store->impl_->pool.acquire());
-    OBJDB_ASSIGN_OR_RETURN(const pg::SchemaState schema,
+    OBJDB_ASSIGN_OR_RETURN(const SchemaState schema,
                            pg::prepareSchema(*lease, describe, pg::schemaMigrations()));
     store->schema_version_ = schema.version_after;
     logger("storage")->info("opened {} (schema {}{})", describe, schema.version_after,
@@ -145,24 +133,15 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> PostgresStore::rawSe
     Params p;
     p.text(key.session).add(int64_t(key.label));
     OBJDB_ASSIGN_OR_RETURN(
-        Result r, c.exec("SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame, "
-                         "r.observation_depth_m, r.parts, r.voxel_parts "
-                         "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
-                         "WHERE s.name = $1 AND r.label = $2",
+        Result r, c.exec(absl::StrFormat("SELECT %s FROM raw_segments r JOIN sessions s ON "
+                                         "s.id = r.session_id WHERE s.name = $1 AND r.label = $2",
+                                         kRawSegmentColumns),
                          p, context));
     if (r.rows() == 0) {
       return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
     }
-    RawSegmentColumns columns;
-    columns.row = r.integer(0, 0);
-    columns.pose = r.bytes(0, 1);
-    columns.grid = r.bytes(0, 2);
-    columns.voxels = r.bytes(0, 3);
-    columns.extraction_frame = r.integer(0, 4);
-    columns.observation_depth_m = r.real(0, 5);
-    columns.parts = r.text(0, 6);
-    if (!r.isNull(0, 7)) columns.voxel_parts = r.bytes(0, 7);
-    OBJDB_ASSIGN_OR_RETURN(out, decodeRawSegment(key, columns));
+    OBJDB_ASSIGN_OR_RETURN(out,
+                           decodeRawSegment(key, readRawSegmentColumns(pgstore::ResultRow(r, 0))));
     return absl::OkStatus();
   }));
   return out;
@@ -187,6 +166,21 @@ StatusOr<int64_t> PostgresStore::rawSegmentId(const database::SegmentKey& key) c
   return id;
 }
 
+StatusOr<std::vector<database::SegmentKey>> PostgresStore::rawSegmentKeys() const {
+  std::vector<database::SegmentKey> keys;
+  OBJDB_RETURN_IF_ERROR(impl_->read("listing raw segments", [&](const pg::Connection& c) -> Status {
+    keys.clear();
+    OBJDB_ASSIGN_OR_RETURN(Result r, c.exec("SELECT s.name, r.label FROM raw_segments r JOIN "
+                                            "sessions s ON s.id = r.session_id ORDER BY r.id",
+                                            Params(), "listing raw segments"));
+    for (int row = 0; row < r.rows(); ++row) {
+      keys.push_back({r.text(row, 0), uint32_t(r.integer(row, 1))});
+    }
+    return absl::OkStatus();
+  }));
+  return keys;
+}
+
 namespace {
 
 StatusOr<std::vector<database::MergeRecord>> readMergeRecords(const PostgresStore::Impl& impl,
@@ -197,22 +191,11 @@ StatusOr<std::vector<database::MergeRecord>> readMergeRecords(const PostgresStor
     Params p;
     if (target) p.add(*target);
     OBJDB_ASSIGN_OR_RETURN(
-        Result r, c.exec(absl::StrFormat("SELECT id, target, source, transform, icp_rmse_m, "
-                                         "tsdf_rmse_m, tsdf_overlap, scene_checks FROM "
-                                         "merge_records %s ORDER BY id",
-                                         target ? "WHERE target = $1" : ""),
+        Result r, c.exec(absl::StrFormat("SELECT %s FROM merge_records %s ORDER BY id",
+                                         kMergeRecordColumns, target ? "WHERE target = $1" : ""),
                          p, "reading merge records"));
     for (int row = 0; row < r.rows(); ++row) {
-      database::MergeRecord m;
-      m.target = r.integer(row, 1);
-      m.source = r.text(row, 2);
-      auto T = decodeTransform(r.bytes(row, 3));
-      if (!T.ok()) return inRow(T.status(), "merge_records", r.integer(row, 0), "transform");
-      m.T_target_source = *T;
-      m.icp_rmse_m = r.real(row, 4);
-      m.tsdf_rmse_m = r.real(row, 5);
-      m.tsdf_overlap = size_t(r.integer(row, 6));
-      m.scene_checks = size_t(r.integer(row, 7));
+      OBJDB_ASSIGN_OR_RETURN(database::MergeRecord m, readMergeRecord(pgstore::ResultRow(r, row)));
       records.push_back(std::move(m));
     }
     return absl::OkStatus();

@@ -9,27 +9,16 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "storage/shared_schema.h"
 #include "storage/sqlite/sqlite_util.h"
 
 namespace objdb::storage {
 
 inline constexpr int32_t kApplicationId = 0x4F424A44;  // "OBJD"
 
-struct Migration {
-  int version;              // the schema version after this step (1, 2, ...)
-  std::string description;  // one line, shown in logs
-  std::string sql;          // DDL/DML run in the step's transaction
-};
-
 // objdb's migrations, in order; the last one's version is the current schema.
 const std::vector<Migration>& schemaMigrations();
 int currentSchemaVersion();
-
-struct SchemaState {
-  int version_before = 0;  // 0 for a new file
-  int version_after = 0;
-  bool created = false;    // the file was empty and got the schema
-};
 
 // Checks the file's identity and version and brings it to the last of `migrations`. Errors:
 // FAILED_PRECONDITION for a foreign or newer file (nothing written), DATA_LOSS when SQLite finds

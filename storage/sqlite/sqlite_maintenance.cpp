@@ -12,15 +12,12 @@
 #include <random>
 
 #include "absl/strings/str_format.h"
-#include "storage/sqlite/sqlite_store.h"
+#include "storage/backup_files.h"
 #include "storage/row_codec.h"
+#include "storage/sqlite/sqlite_store.h"
 #include "storage/sqlite/sqlite_store_internal.h"
 
 namespace objdb::storage {
-
-using internal::kSavedTables;
-using internal::kSceneTables;
-using internal::MapTables;
 
 StatusOr<CheckReport> SqliteStore::check() const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
@@ -44,11 +41,11 @@ StatusOr<CheckReport> SqliteStore::check() const {
     }
   }
   for (const BlobColumn& c : checkedBlobColumns()) {
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement s,
-        Statement::prepare(*lease, absl::StrFormat("SELECT rowid, %s FROM %s WHERE %s IS NOT NULL "
-                                                   "ORDER BY rowid",
-                                                   c.column, c.table, c.column)));
+    OBJDB_ASSIGN_OR_RETURN(Statement s,
+                           Statement::prepare(*lease,
+                                              "SELECT rowid, %s FROM %s WHERE %s IS NOT NULL "
+                                              "ORDER BY rowid",
+                                              c.column, c.table, c.column));
     while (true) {
       OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
       if (!row) break;
@@ -60,12 +57,12 @@ StatusOr<CheckReport> SqliteStore::check() const {
     }
   }
   for (const MapTables* tables : {&kSceneTables, &kSavedTables}) {
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement blocks,
-        Statement::prepare(*lease, absl::StrFormat("SELECT b.rowid, m.voxels_per_side, b.tsdf "
-                                                   "FROM %s b JOIN %s m ON m.session_id = "
-                                                   "b.session_id ORDER BY b.rowid",
-                                                   tables->blocks, tables->maps)));
+    OBJDB_ASSIGN_OR_RETURN(Statement blocks,
+                           Statement::prepare(*lease,
+                                              "SELECT b.rowid, m.voxels_per_side, b.tsdf "
+                                              "FROM %s b JOIN %s m ON m.session_id = "
+                                              "b.session_id ORDER BY b.rowid",
+                                              tables->blocks, tables->maps));
     while (true) {
       OBJDB_ASSIGN_OR_RETURN(const bool row, blocks.step());
       if (!row) break;
@@ -165,23 +162,11 @@ StatusOr<BackupReport> SqliteStore::backupTo(const std::string& path) const {
     if (named != 0 && (errno == EPERM || errno == EOPNOTSUPP || errno == ENOSYS)) {
       named = ::renameat2(AT_FDCWD, partial.c_str(), AT_FDCWD, path.c_str(), RENAME_NOREPLACE);
     }
-    if (named != 0) {
-      copied = errno == EEXIST
-                   ? absl::AlreadyExistsError(absl::StrFormat(
-                         "backup: %s appeared while the copy was made; it was left alone", path))
-                   : absl::UnavailableError(absl::StrFormat("backup: naming the copy %s: %s",
-                                                            path, std::strerror(errno)));
-    }
+    if (named != 0) copied = backupNamingError(path, errno);
   }
   removeDatabaseFiles(partial);
   if (!copied.ok()) return copied;
-  // The new name survives a power loss only once its directory is synced.
-  const std::string directory = std::filesystem::path(path).parent_path().string();
-  const int dir_fd = ::open(directory.empty() ? "." : directory.c_str(), O_RDONLY | O_CLOEXEC);
-  if (dir_fd >= 0) {
-    ::fsync(dir_fd);
-    ::close(dir_fd);
-  }
+  syncDirectoryOf(path);
   return report;
 }
 
@@ -196,9 +181,8 @@ StatusOr<StoreStats> SqliteStore::stats() const {
 
   for (const auto& [table, bytes] : statsTables()) {
     OBJDB_ASSIGN_OR_RETURN(
-        Statement s, Statement::prepare(*lease, absl::StrFormat(
-                                                    "SELECT COUNT(*), COALESCE(SUM(%s), 0) FROM %s",
-                                                    bytes, table)));
+        Statement s,
+        Statement::prepare(*lease, "SELECT COUNT(*), COALESCE(SUM(%s), 0) FROM %s", bytes, table));
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
     if (row) stats.tables.push_back({table, s.columnInt(0), s.columnInt(1)});
   }
@@ -219,8 +203,7 @@ StatusOr<StoreStats> SqliteStore::stats() const {
 }
 
 Status SqliteStore::checkpoint() {
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   return writer_->exec("PRAGMA wal_checkpoint(TRUNCATE)", "checkpointing the WAL");
 }
 

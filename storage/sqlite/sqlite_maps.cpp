@@ -12,9 +12,6 @@
 namespace objdb::storage {
 
 using internal::kNow;
-using internal::kSavedTables;
-using internal::kSceneTables;
-using internal::MapTables;
 
 Status SqliteStore::writeMap(const MapTables& tables, const std::string& session,
                              const tsdf::TsdfLayer& scene, const gsm::LabelBlocks* labels,
@@ -23,42 +20,38 @@ Status SqliteStore::writeMap(const MapTables& tables, const std::string& session
       const EncodedMap encoded,
       encodeMap(absl::StrFormat("%s of session %s", tables.what, session), scene, labels,
                 options_.blobs));
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
   OBJDB_ASSIGN_OR_RETURN(const int64_t sid, sessionIdForWrite(session));
   OBJDB_ASSIGN_OR_RETURN(
-      Statement map,
-      Statement::prepare(*writer_,
-                         absl::StrFormat("INSERT INTO %s(session_id, voxel_size, voxels_per_side, "
-                                         "blocks, updated_at) VALUES (?, ?, ?, ?, %s) "
-                                         "ON CONFLICT(session_id) DO UPDATE "
-                                         "SET voxel_size = excluded.voxel_size, "
-                                         "voxels_per_side = excluded.voxels_per_side, "
-                                         "blocks = excluded.blocks, "
-                                         "updated_at = excluded.updated_at",
-                                         tables.maps, kNow)));
+      Statement map, Statement::prepare(*writer_,
+                                        "INSERT INTO %s(session_id, voxel_size, voxels_per_side, "
+                                        "blocks, updated_at) VALUES (?, ?, ?, ?, %s) "
+                                        "ON CONFLICT(session_id) DO UPDATE "
+                                        "SET voxel_size = excluded.voxel_size, "
+                                        "voxels_per_side = excluded.voxels_per_side, "
+                                        "blocks = excluded.blocks, "
+                                        "updated_at = excluded.updated_at",
+                                        tables.maps, kNow));
   map.bind(1, sid).bind(2, encoded.voxel_size).bind(3, encoded.voxels_per_side);
   OBJDB_RETURN_IF_ERROR(map.bind(4, int64_t(encoded.tsdf.size())).run());
   if (tables.has_frames) {
     OBJDB_ASSIGN_OR_RETURN(
         Statement count,
-        Statement::prepare(*writer_, absl::StrFormat("UPDATE %s SET frames = ? WHERE session_id = ?",
-                                                     tables.maps)));
+        Statement::prepare(*writer_, "UPDATE %s SET frames = ? WHERE session_id = ?", tables.maps));
     OBJDB_RETURN_IF_ERROR(count.bind(1, frames).bind(2, sid).run());
   }
   // A block table's rows of this session replaced by `rows` (TSDF or label blocks).
   auto replaceBlocks = [&](const char* table, const char* column,
                            const std::vector<EncodedBlock>& rows) -> Status {
     OBJDB_ASSIGN_OR_RETURN(
-        Statement del,
-        Statement::prepare(*writer_, absl::StrFormat("DELETE FROM %s WHERE session_id = ?", table)));
+        Statement del, Statement::prepare(*writer_, "DELETE FROM %s WHERE session_id = ?", table));
     OBJDB_RETURN_IF_ERROR(del.bind(1, sid).run());
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement insert,
-        Statement::prepare(*writer_, absl::StrFormat("INSERT INTO %s(session_id, bx, by, bz, %s) "
-                                                     "VALUES (?, ?, ?, ?, ?)",
-                                                     table, column)));
+    OBJDB_ASSIGN_OR_RETURN(Statement insert,
+                           Statement::prepare(*writer_,
+                                              "INSERT INTO %s(session_id, bx, by, bz, %s) "
+                                              "VALUES (?, ?, ?, ?, ?)",
+                                              table, column));
     for (const auto& b : rows) {
       OBJDB_RETURN_IF_ERROR(insert.reset());
       insert.bind(1, sid).bind(2, int64_t(b.index.x())).bind(3, int64_t(b.index.y()));
@@ -103,14 +96,13 @@ StatusOr<SavedMap> SqliteStore::savedMap(const std::string& session) const {
 
 StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::readMapLabels(
     const Connection& connection, const MapTables& tables, const std::string& session) const {
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement b,
-      Statement::prepare(connection,
-                         absl::StrFormat("SELECT l.rowid, l.bx, l.by, l.bz, l.labels, "
-                                         "m.voxels_per_side FROM %s l JOIN %s m ON m.session_id "
-                                         "= l.session_id JOIN sessions s ON s.id = l.session_id "
-                                         "WHERE s.name = ?",
-                                         tables.label_blocks, tables.maps)));
+  OBJDB_ASSIGN_OR_RETURN(Statement b,
+                         Statement::prepare(connection,
+                                            "SELECT l.rowid, l.bx, l.by, l.bz, l.labels, "
+                                            "m.voxels_per_side FROM %s l JOIN %s m ON m.session_id "
+                                            "= l.session_id JOIN sessions s ON s.id = l.session_id "
+                                            "WHERE s.name = ?",
+                                            tables.label_blocks, tables.maps));
   b.bind(1, session);
   auto labels = std::make_shared<gsm::LabelBlocks>();
   while (true) {
@@ -133,13 +125,12 @@ StatusOr<std::shared_ptr<const gsm::LabelBlocks>> SqliteStore::readMapLabels(
 StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::readMapTsdf(
     const Connection& connection, const MapTables& tables, const std::string& session,
     int64_t* frames) const {
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement m,
-      Statement::prepare(connection,
-                         absl::StrFormat("SELECT m.session_id, m.voxel_size, m.voxels_per_side, "
-                                         "%s FROM %s m JOIN sessions s ON s.id = "
-                                         "m.session_id WHERE s.name = ?",
-                                         tables.has_frames ? "m.frames" : "0", tables.maps)));
+  OBJDB_ASSIGN_OR_RETURN(Statement m,
+                         Statement::prepare(connection,
+                                            "SELECT m.session_id, m.voxel_size, m.voxels_per_side, "
+                                            "%s FROM %s m JOIN sessions s ON s.id = "
+                                            "m.session_id WHERE s.name = ?",
+                                            tables.has_frames ? "m.frames" : "0", tables.maps));
   m.bind(1, session);
   OBJDB_ASSIGN_OR_RETURN(const bool found, m.step());
   if (!found) return std::shared_ptr<const tsdf::TsdfLayer>();
@@ -149,11 +140,10 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::readMapTsdf(
   auto layer = emptyMap(absl::StrFormat("%s of session %s", tables.what, session),
                         m.columnDouble(1), vps);
   if (!layer.ok()) return layer.status();
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement b,
-      Statement::prepare(connection, absl::StrFormat("SELECT rowid, bx, by, bz, tsdf FROM %s "
-                                                     "WHERE session_id = ?",
-                                                     tables.blocks)));
+  OBJDB_ASSIGN_OR_RETURN(Statement b, Statement::prepare(connection,
+                                                         "SELECT rowid, bx, by, bz, tsdf FROM %s "
+                                                         "WHERE session_id = ?",
+                                                         tables.blocks));
   b.bind(1, sid);
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, b.step());
@@ -195,19 +185,18 @@ StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> SqliteStore::scene(
 
 Status SqliteStore::deleteSavedMap(const std::string& session) {
   for (const char* table : {kSavedTables.label_blocks, kSavedTables.blocks, kSavedTables.maps}) {
-    OBJDB_ASSIGN_OR_RETURN(
-        Statement del,
-        Statement::prepare(*writer_, absl::StrFormat("DELETE FROM %s WHERE session_id = "
-                                                     "(SELECT id FROM sessions WHERE name = ?)",
-                                                     table)));
+    OBJDB_ASSIGN_OR_RETURN(Statement del,
+                           Statement::prepare(*writer_,
+                                              "DELETE FROM %s WHERE session_id = "
+                                              "(SELECT id FROM sessions WHERE name = ?)",
+                                              table));
     OBJDB_RETURN_IF_ERROR(del.bind(1, session).run());
   }
   return absl::OkStatus();
 }
 
 Status SqliteStore::dropSavedMap(const std::string& session) {
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   auto body = [&]() -> Status {
     OBJDB_ASSIGN_OR_RETURN(Transaction txn,
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));

@@ -36,19 +36,17 @@ void bindModel(Statement* s, const EncodedModel& e) {
 
 StatusOr<int64_t> SqliteStore::addModel(model::ObjectModel model) {
   const EncodedModel e = encodeModel(model, options_.blobs);
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   auto body = [&]() -> StatusOr<int64_t> {
     OBJDB_ASSIGN_OR_RETURN(Transaction txn,
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));
     std::string placeholders;
     for (int i = 0; i < kNumModelColumns; ++i) placeholders += "?, ";
     OBJDB_ASSIGN_OR_RETURN(
-        Statement s,
-        Statement::prepare(*writer_,
-                           absl::StrFormat("INSERT INTO models(%s, state, created_at, updated_at) "
-                                           "VALUES (%s'active', %s, %s)",
-                                           kModelColumns, placeholders, kNow, kNow)));
+        Statement s, Statement::prepare(*writer_,
+                                        "INSERT INTO models(%s, state, created_at, updated_at) "
+                                        "VALUES (%s'active', %s, %s)",
+                                        kModelColumns, placeholders, kNow, kNow));
     bindModel(&s, e);
     OBJDB_RETURN_IF_ERROR(s.run());
     const int64_t id = sqlite3_last_insert_rowid(writer_->get());
@@ -95,11 +93,10 @@ Status SqliteStore::rewriteModel(const EncodedModel& e, int64_t id,
   for (const absl::string_view column : absl::StrSplit(kModelColumns, ", ")) {
     absl::StrAppend(&assignments, column, " = ?, ");
   }
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*writer_, absl::StrFormat("UPDATE models SET %supdated_at = %s "
-                                                   "WHERE id = ? AND state = 'active'",
-                                                   assignments, kNow)));
+  OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*writer_,
+                                                         "UPDATE models SET %supdated_at = %s "
+                                                         "WHERE id = ? AND state = 'active'",
+                                                         assignments, kNow));
   bindModel(&s, e);
   s.bind(kNumModelColumns + 1, id);
   OBJDB_RETURN_IF_ERROR(s.run());
@@ -108,14 +105,13 @@ Status SqliteStore::rewriteModel(const EncodedModel& e, int64_t id,
   }
   OBJDB_RETURN_IF_ERROR(writeObservations(id, e, /*replace=*/true));
   if (merge == nullptr) return absl::OkStatus();
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement m,
-      Statement::prepare(*writer_,
-                         absl::StrFormat("INSERT INTO merge_records(target, source, transform, "
-                                         "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
-                                         "scene_checks, created_at) VALUES "
-                                         "(?, ?, ?, ?, ?, ?, ?, %s)",
-                                         kNow)));
+  OBJDB_ASSIGN_OR_RETURN(Statement m,
+                         Statement::prepare(*writer_,
+                                            "INSERT INTO merge_records(target, source, transform, "
+                                            "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
+                                            "scene_checks, created_at) VALUES "
+                                            "(?, ?, ?, ?, ?, ?, ?, %s)",
+                                            kNow));
   m.bind(1, merge->target).bind(2, merge->source).bindBlob(3, encodeTransform(merge->T_target_source));
   m.bind(4, merge->icp_rmse_m).bind(5, merge->tsdf_rmse_m);
   m.bind(6, int64_t(merge->tsdf_overlap)).bind(7, int64_t(merge->scene_checks));
@@ -125,8 +121,7 @@ Status SqliteStore::rewriteModel(const EncodedModel& e, int64_t id,
 Status SqliteStore::replaceModel(model::ObjectModel model,
                                  const std::optional<database::MergeRecord>& merge) {
   const EncodedModel e = encodeModel(model, options_.blobs);
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   auto body = [&]() -> Status {
     OBJDB_ASSIGN_OR_RETURN(Transaction txn,
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));
@@ -139,8 +134,7 @@ Status SqliteStore::replaceModel(model::ObjectModel model,
 Status SqliteStore::absorbModel(model::ObjectModel target, const database::MergeRecord& merge,
                                 int64_t absorbed) {
   const EncodedModel e = encodeModel(target, options_.blobs);
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   auto body = [&]() -> Status {
     if (absorbed == target.id) {
       return absl::InvalidArgumentError("a model cannot be merged into itself");
@@ -160,14 +154,13 @@ Status SqliteStore::absorbModel(model::ObjectModel target, const database::Merge
 // Active model `id` out of the active set: state removed, or merged into `merged_into` (> 0);
 // its blobs and observations dropped, its row kept. Runs inside the caller's write transaction.
 Status SqliteStore::retireModel(int64_t id, int64_t merged_into) {
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*writer_,
-                         absl::StrFormat("UPDATE models SET state = ?, merged_into = ?, "
-                                         "grid = NULL, surface_voxels = NULL, cloud = NULL, "
-                                         "keypoints = NULL, descriptors = NULL, updated_at = %s "
-                                         "WHERE id = ? AND state = 'active'",
-                                         kNow)));
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*writer_,
+                                            "UPDATE models SET state = ?, merged_into = ?, "
+                                            "grid = NULL, surface_voxels = NULL, cloud = NULL, "
+                                            "keypoints = NULL, descriptors = NULL, updated_at = %s "
+                                            "WHERE id = ? AND state = 'active'",
+                                            kNow));
   s.bind(1, std::string_view(merged_into > 0 ? "merged" : "removed"));
   if (merged_into > 0) {
     s.bind(2, merged_into);
@@ -185,8 +178,7 @@ Status SqliteStore::retireModel(int64_t id, int64_t merged_into) {
 }
 
 Status SqliteStore::removeModel(int64_t id) {
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   auto body = [&]() -> Status {
     OBJDB_ASSIGN_OR_RETURN(Transaction txn,
                            Transaction::begin(*writer_, Transaction::Kind::kWrite));
@@ -198,8 +190,7 @@ Status SqliteStore::removeModel(int64_t id) {
 }
 
 Status SqliteStore::setSuccessor(int64_t removed, int64_t successor) {
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*writer_,
                                                          "UPDATE models SET merged_into = ? "
                                                          "WHERE id = ? AND state = 'removed'"));
@@ -229,25 +220,15 @@ StatusOr<ModelFate> SqliteStore::modelFate(int64_t id) const {
 StatusOr<std::shared_ptr<const model::ObjectModel>> SqliteStore::model(int64_t id) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*lease, absl::StrFormat("SELECT %s FROM models WHERE id = ? AND "
-                                                 "state = 'active'",
-                                                 kModelColumns)));
+  OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*lease,
+                                                         "SELECT %s FROM models WHERE id = ? AND "
+                                                         "state = 'active'",
+                                                         kModelColumns));
   s.bind(1, id);
   OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
   if (!row) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
-  ModelColumns columns;
-  columns.planar = s.columnInt(0) != 0;
-  columns.plane_inlier_ratio = s.columnDouble(1);
-  columns.grid = s.columnBlob(11);
-  columns.surface_voxels = s.columnBlob(12);
-  columns.cloud = s.columnBlob(13);
-  columns.keypoints = s.columnBlob(14);
-  columns.descriptors = s.columnBlob(15);
-  columns.timings = {s.columnDouble(16), s.columnDouble(17), s.columnDouble(18), s.columnDouble(19)};
-  columns.structure = s.columnInt(20) != 0;
-  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel m, decodeModel(id, columns));
+  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel m,
+                         decodeModel(id, readModelColumns(internal::StatementRow(s))));
   OBJDB_ASSIGN_OR_RETURN(
       Statement o,
       Statement::prepare(*lease,
@@ -279,17 +260,9 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
   }
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
-      Statement::prepare(
-          *lease,
-          absl::StrFormat("SELECT m.id, m.state, COALESCE(m.merged_into, 0), m.planar, "
-                          "m.num_points, m.num_keypoints, COALESCE(m.voxel_size, 0), "
-                          "COALESCE(m.bbox_min_x, 0), COALESCE(m.bbox_min_y, 0), "
-                          "COALESCE(m.bbox_min_z, 0), COALESCE(m.bbox_max_x, 0), "
-                          "COALESCE(m.bbox_max_y, 0), COALESCE(m.bbox_max_z, 0), "
-                          "(SELECT COUNT(*) FROM merge_records r WHERE r.target = m.id), "
-                          "m.structure "
-                          "FROM models m WHERE m.id > ?1 AND %s ORDER BY m.id LIMIT ?3",
-                          where)));
+      Statement::prepare(*lease,
+                         "SELECT %s FROM models m WHERE m.id > ?1 AND %s ORDER BY m.id LIMIT ?3",
+                         kModelSummaryColumns, where));
   s.bind(1, query.after_id);
   if (!query.session.empty()) s.bind(2, query.session);
   s.bind(3, int64_t(std::min<size_t>(query.limit, size_t(1) << 30)));
@@ -297,21 +270,7 @@ StatusOr<std::vector<ModelSummary>> SqliteStore::modelSummaries(const ModelQuery
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
     if (!row) break;
-    ModelSummary m;
-    m.id = s.columnInt(0);
-    m.state = s.columnText(1);
-    m.merged_into = s.columnInt(2);
-    m.planar = s.columnInt(3) != 0;
-    m.num_points = s.columnInt(4);
-    m.num_keypoints = s.columnInt(5);
-    m.voxel_size = s.columnDouble(6);
-    for (int k = 0; k < 3; ++k) {
-      m.bbox_min[k] = s.columnDouble(7 + k);
-      m.bbox_max[k] = s.columnDouble(10 + k);
-    }
-    m.merges = s.columnInt(13);
-    m.structure = s.columnInt(14) != 0;
-    out.push_back(std::move(m));
+    out.push_back(readModelSummary(internal::StatementRow(s)));
   }
   OBJDB_ASSIGN_OR_RETURN(
       Statement o,
@@ -355,28 +314,21 @@ StatusOr<std::vector<int64_t>> SqliteStore::modelIds() const {
 StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*lease,
-                         "SELECT id, planar, num_points, num_keypoints, descriptors, structure "
-                         "FROM models WHERE state = 'active' ORDER BY id"));
   database::MatchEntries out;
-  std::map<int64_t, size_t> slot;
+  std::map<int64_t, size_t> slot;  // entry of each model id
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease,
+                                            "SELECT %s FROM models WHERE state = 'active' "
+                                            "ORDER BY id",
+                                            kMatchEntryColumns));
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
     if (!row) break;
     database::MatchEntry e;
-    e.id = s.columnInt(0);
-    e.planar = s.columnInt(1) != 0;
-    e.structure = s.columnInt(5) != 0;
-    e.num_points = size_t(s.columnInt(2));
-    e.num_keypoints = size_t(s.columnInt(3));
-    auto descriptors = decodeDescriptors(s.columnBlob(4));
-    if (!descriptors.ok()) {
-      out.skipped.push_back(inRow(descriptors.status(), "models", e.id, "descriptors"));
+    if (Status read = readMatchEntry(internal::StatementRow(s), &e); !read.ok()) {
+      out.skipped.push_back(std::move(read));
       continue;
     }
-    e.descriptors = std::move(*descriptors);
     slot[e.id] = out.entries.size();
     out.entries.push_back(std::move(e));
   }

@@ -21,12 +21,12 @@ Status duplicateSession(const Status& status, const std::string& name) {
 
 StatusOr<int64_t> SqliteStore::sessionIdForWrite(const std::string& name) {
   if (name.empty()) return absl::InvalidArgumentError("session name is empty");
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement insert,
-      Statement::prepare(*writer_, absl::StrFormat("INSERT INTO sessions(name, started_at, state) "
-                                                   "VALUES (?, %s, 'open') "
-                                                   "ON CONFLICT(name) DO NOTHING",
-                                                   kNow)));
+  OBJDB_ASSIGN_OR_RETURN(Statement insert,
+                         Statement::prepare(*writer_,
+                                            "INSERT INTO sessions(name, started_at, state) "
+                                            "VALUES (?, %s, 'open') "
+                                            "ON CONFLICT(name) DO NOTHING",
+                                            kNow));
   OBJDB_RETURN_IF_ERROR(insert.bind(1, name).run());
   OBJDB_ASSIGN_OR_RETURN(Statement select,
                          Statement::prepare(*writer_, "SELECT id FROM sessions WHERE name = ?"));
@@ -38,14 +38,13 @@ StatusOr<int64_t> SqliteStore::sessionIdForWrite(const std::string& name) {
 
 StatusOr<SessionInfo> SqliteStore::beginSession(const SessionInfo& info) {
   if (info.name.empty()) return absl::InvalidArgumentError("session name is empty");
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*writer_, absl::StrFormat("INSERT INTO sessions(name, intrinsics, params, "
-                                                   "started_at, state) VALUES (?, ?, ?, %s, 'open')",
-                                                   kNow)));
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*writer_,
+                                            "INSERT INTO sessions(name, intrinsics, params, "
+                                            "started_at, state) VALUES (?, ?, ?, %s, 'open')",
+                                            kNow));
   s.bind(1, info.name).bind(2, info.intrinsics_json).bind(3, info.params_json);
   OBJDB_RETURN_IF_ERROR(duplicateSession(s.run(), info.name));
   const int64_t id = sqlite3_last_insert_rowid(writer_->get());
@@ -57,13 +56,12 @@ StatusOr<SessionInfo> SqliteStore::beginSession(const SessionInfo& info) {
 }
 
 Status SqliteStore::finishSession(const std::string& name, SessionState state, int64_t frames) {
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*writer_, absl::StrFormat("UPDATE sessions SET state = ?, frames = ?, "
-                                                   "ended_at = %s WHERE name = ?",
-                                                   kNow)));
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*writer_,
+                                            "UPDATE sessions SET state = ?, frames = ?, "
+                                            "ended_at = %s WHERE name = ?",
+                                            kNow));
   s.bind(1, std::string_view(sessionStateName(state))).bind(2, frames).bind(3, name);
   OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
   OBJDB_RETURN_IF_ERROR(s.run());
@@ -79,22 +77,12 @@ StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(
       Statement s,
-      Statement::prepare(*lease, "SELECT id, name, intrinsics, params, started_at, "
-                                 "COALESCE(ended_at, ''), state, frames FROM sessions ORDER BY id"));
+      Statement::prepare(*lease, "SELECT %s FROM sessions ORDER BY id", kSessionColumns));
   std::vector<SessionInfo> out;
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
     if (!row) break;
-    SessionInfo info;
-    info.id = s.columnInt(0);
-    info.name = s.columnText(1);
-    info.intrinsics_json = s.columnText(2);
-    info.params_json = s.columnText(3);
-    info.started_at = s.columnText(4);
-    info.ended_at = s.columnText(5);
-    info.state = sessionStateFromName(s.columnText(6));
-    info.frames = s.columnInt(7);
-    out.push_back(std::move(info));
+    out.push_back(readSession(internal::StatementRow(s)));
   }
   return out;
 }

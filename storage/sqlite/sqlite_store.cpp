@@ -25,18 +25,9 @@ Status SqliteStoreOptions::validate() const {
     return absl::InvalidArgumentError(
         absl::StrFormat("storage.synchronous must be FULL or NORMAL, got '%s'", synchronous));
   }
-  if (!(busy_timeout_ms >= 0 && busy_timeout_ms <= 600000)) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("storage.busy_timeout_ms must be in [0, 600000], got %d", busy_timeout_ms));
-  }
-  if (!(max_cached_scenes >= 1 && max_cached_scenes <= 1024)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "storage.max_cached_scenes must be in [1, 1024], got %d", max_cached_scenes));
-  }
-  if (!(max_readers >= 1 && max_readers <= 256)) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("storage.max_readers must be in [1, 256], got %d", max_readers));
-  }
+  OBJDB_RETURN_IF_ERROR(checkOptionRange("busy_timeout_ms", busy_timeout_ms, 0, 600000));
+  OBJDB_RETURN_IF_ERROR(checkOptionRange("max_cached_scenes", max_cached_scenes, 1, 1024));
+  OBJDB_RETURN_IF_ERROR(checkOptionRange("max_readers", max_readers, 1, 256));
   if (!(journal_size_limit_bytes >= 0)) {
     return absl::InvalidArgumentError("storage.journal_size_limit_bytes must be >= 0");
   }
@@ -49,6 +40,8 @@ SqliteStore::SqliteStore(std::string path, SqliteStoreOptions options)
       scene_cache_(size_t(options_.max_cached_scenes)) {}
 
 SqliteStore::~SqliteStore() = default;
+
+std::string SqliteStore::describe() const { return path_; }
 
 StatusOr<std::unique_ptr<SqliteStore>> SqliteStore::open(const std::string& path,
                                                          const SqliteStoreOptions& options) {
@@ -130,17 +123,17 @@ StatusOr<SqliteStore::ReaderLease> SqliteStore::reader() const {
   return ReaderLease(this, std::move(c));
 }
 
-Status SqliteStore::requireWriter() const {
+StatusOr<std::unique_lock<std::mutex>> SqliteStore::holdWriter() const {
+  std::unique_lock lock(write_mutex_);
   if (!writer_) {
     return absl::FailedPreconditionError(absl::StrFormat("%s is open read-only", path_));
   }
-  return absl::OkStatus();
+  return lock;
 }
 
 Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
   OBJDB_ASSIGN_OR_RETURN(const EncodedRawSegment e, encodeRawSegment(segment, options_.blobs));
-  std::lock_guard lock(write_mutex_);
-  OBJDB_RETURN_IF_ERROR(requireWriter());
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
   const std::string context =
       absl::StrFormat("storing raw segment %s/%d", segment.key.session, segment.key.label);
   auto body = [&]() -> Status {
@@ -151,16 +144,15 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
         Statement s,
         Statement::prepare(
             *writer_,
-            absl::StrFormat(
-                "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
-                "extraction_frame, observation_depth_m, parts, voxel_parts, extracted_at) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, %s) "
-                "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
-                "grid = excluded.grid, voxels = excluded.voxels, "
-                "extraction_frame = excluded.extraction_frame, "
-                "observation_depth_m = excluded.observation_depth_m, parts = excluded.parts, "
-                "voxel_parts = excluded.voxel_parts, extracted_at = excluded.extracted_at",
-                kNow)));
+            "INSERT INTO raw_segments(session_id, label, pose, grid, voxels, "
+            "extraction_frame, observation_depth_m, parts, voxel_parts, extracted_at) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, %s) "
+            "ON CONFLICT(session_id, label) DO UPDATE SET pose = excluded.pose, "
+            "grid = excluded.grid, voxels = excluded.voxels, "
+            "extraction_frame = excluded.extraction_frame, "
+            "observation_depth_m = excluded.observation_depth_m, parts = excluded.parts, "
+            "voxel_parts = excluded.voxel_parts, extracted_at = excluded.extracted_at",
+            kNow));
     s.bind(1, sid).bind(2, int64_t(segment.key.label)).bindBlob(3, e.pose).bindBlob(4, e.grid);
     s.bindBlob(5, e.voxels).bind(6, segment.extraction_frame);
     s.bind(7, double(segment.observation_depth_m)).bind(8, e.parts);
@@ -178,28 +170,18 @@ Status SqliteStore::putRawSegment(const database::RawSegmentRecord& segment) {
 StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegment(
     const database::SegmentKey& key) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*lease,
-                         "SELECT r.id, r.pose, r.grid, r.voxels, r.extraction_frame, "
-                         "r.observation_depth_m, r.parts, r.voxel_parts "
-                         "FROM raw_segments r JOIN sessions s ON s.id = r.session_id "
-                         "WHERE s.name = ? AND r.label = ?"));
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease,
+                                            "SELECT %s FROM raw_segments r JOIN sessions s "
+                                            "ON s.id = r.session_id WHERE s.name = ? AND "
+                                            "r.label = ?",
+                                            kRawSegmentColumns));
   s.bind(1, key.session).bind(2, int64_t(key.label));
   OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
   if (!row) {
     return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
   }
-  RawSegmentColumns columns;
-  columns.row = s.columnInt(0);
-  columns.pose = s.columnBlob(1);
-  columns.grid = s.columnBlob(2);
-  columns.voxels = s.columnBlob(3);
-  columns.extraction_frame = s.columnInt(4);
-  columns.observation_depth_m = s.columnDouble(5);
-  columns.parts = s.columnText(6);
-  if (!s.columnIsNull(7)) columns.voxel_parts = s.columnBlob(7);
-  return decodeRawSegment(key, columns);
+  return decodeRawSegment(key, readRawSegmentColumns(internal::StatementRow(s)));
 }
 
 StatusOr<int64_t> SqliteStore::rawSegmentId(const database::SegmentKey& key) const {
@@ -216,6 +198,21 @@ StatusOr<int64_t> SqliteStore::rawSegmentId(const database::SegmentKey& key) con
   return s.columnInt(0);
 }
 
+StatusOr<std::vector<database::SegmentKey>> SqliteStore::rawSegmentKeys() const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease,
+                                            "SELECT s.name, r.label FROM raw_segments r JOIN "
+                                            "sessions s ON s.id = r.session_id ORDER BY r.id"));
+  std::vector<database::SegmentKey> keys;
+  while (true) {
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) break;
+    keys.push_back({s.columnText(0), uint32_t(s.columnInt(1))});
+  }
+  return keys;
+}
+
 StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecords() const {
   return readMergeRecords(std::nullopt);
 }
@@ -227,27 +224,15 @@ StatusOr<std::vector<database::MergeRecord>> SqliteStore::mergeRecordsInto(int64
 StatusOr<std::vector<database::MergeRecord>> SqliteStore::readMergeRecords(
     std::optional<int64_t> target) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
-  OBJDB_ASSIGN_OR_RETURN(
-      Statement s,
-      Statement::prepare(*lease, absl::StrFormat("SELECT id, target, source, transform, "
-                                                 "icp_rmse_m, tsdf_rmse_m, tsdf_overlap, "
-                                                 "scene_checks FROM merge_records %s ORDER BY id",
-                                                 target ? "WHERE target = ?" : "")));
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease, "SELECT %s FROM merge_records %s ORDER BY id",
+                                            kMergeRecordColumns, target ? "WHERE target = ?" : ""));
   if (target) s.bind(1, *target);
   std::vector<database::MergeRecord> records;
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
     if (!row) break;
-    database::MergeRecord r;
-    r.target = s.columnInt(1);
-    r.source = s.columnText(2);
-    auto T = decodeTransform(s.columnBlob(3));
-    if (!T.ok()) return inRow(T.status(), "merge_records", s.columnInt(0), "transform");
-    r.T_target_source = *T;
-    r.icp_rmse_m = s.columnDouble(4);
-    r.tsdf_rmse_m = s.columnDouble(5);
-    r.tsdf_overlap = size_t(s.columnInt(6));
-    r.scene_checks = size_t(s.columnInt(7));
+    OBJDB_ASSIGN_OR_RETURN(database::MergeRecord r, readMergeRecord(internal::StatementRow(s)));
     records.push_back(std::move(r));
   }
   return records;

@@ -1,5 +1,5 @@
 // Private to storage/sqlite/: what the files of SqliteStore's implementation share (the time
-// expression of every row, the map tables, row-annotated blob errors, the reader lease). Not
+// expression of every row, a statement's row for the row readers, the reader lease). Not
 // included outside storage/sqlite/.
 #pragma once
 
@@ -20,19 +20,19 @@ namespace internal {
 // SQL for "now" as the rows keep times: ISO-8601 UTC with milliseconds.
 inline constexpr const char* kNow = "strftime('%Y-%m-%dT%H:%M:%fZ','now')";
 
-// The tables of one kind of stored map: a session's scene map, or its saved live map.
-struct MapTables {
-  const char* what;  // in messages: "scene" or "saved map"
-  const char* maps;
-  const char* blocks;
-  const char* label_blocks;
-  bool has_frames;  // the map table has a `frames` column
-};
+// The current row of a statement, for the row readers of storage/row_codec.h.
+class StatementRow final : public Row {
+ public:
+  explicit StatementRow(const Statement& statement) : statement_(statement) {}
+  bool isNull(int column) const override { return statement_.columnIsNull(column); }
+  int64_t integer(int column) const override { return statement_.columnInt(column); }
+  double real(int column) const override { return statement_.columnDouble(column); }
+  std::string text(int column) const override { return statement_.columnText(column); }
+  std::string_view bytes(int column) const override { return statement_.columnBlob(column); }
 
-inline constexpr MapTables kSceneTables{"scene", "scene_maps", "scene_blocks",
-                                        "scene_label_blocks", false};
-inline constexpr MapTables kSavedTables{"saved map", "saved_maps", "saved_blocks",
-                                        "saved_label_blocks", true};
+ private:
+  const Statement& statement_;
+};
 
 }  // namespace internal
 

@@ -1,5 +1,8 @@
 #include "storage/sqlite/sqlite_util.h"
 
+#include <algorithm>
+#include <initializer_list>
+
 #include "absl/strings/str_format.h"
 
 namespace objdb::storage {
@@ -9,29 +12,18 @@ Status sqliteStatus(int rc, sqlite3* db, std::string_view context) {
   const std::string message = absl::StrFormat(
       "%s: %s (%s)", context, db != nullptr ? sqlite3_errmsg(db) : sqlite3_errstr(rc),
       sqlite3_errstr(rc));
-  switch (rc & 0xff) {
-    case SQLITE_BUSY:
-    case SQLITE_LOCKED:
-    case SQLITE_IOERR:
-    case SQLITE_CANTOPEN:
-    case SQLITE_PROTOCOL:
-      return absl::UnavailableError(message);
-    case SQLITE_FULL:
-    case SQLITE_NOMEM:
-    case SQLITE_TOOBIG:
-      return absl::ResourceExhaustedError(message);
-    case SQLITE_CORRUPT:
-    case SQLITE_NOTADB:
-      return absl::DataLossError(message);
-    case SQLITE_CONSTRAINT:
-      return absl::FailedPreconditionError(message);
-    case SQLITE_READONLY:
-    case SQLITE_PERM:
-    case SQLITE_AUTH:
-      return absl::PermissionDeniedError(message);
-    default:
-      return absl::InternalError(message);
+  // By the primary result code.
+  const auto any = [primary = rc & 0xff](std::initializer_list<int> codes) {
+    return std::find(codes.begin(), codes.end(), primary) != codes.end();
+  };
+  if (any({SQLITE_BUSY, SQLITE_LOCKED, SQLITE_IOERR, SQLITE_CANTOPEN, SQLITE_PROTOCOL})) {
+    return absl::UnavailableError(message);
   }
+  if (any({SQLITE_FULL, SQLITE_NOMEM, SQLITE_TOOBIG})) return absl::ResourceExhaustedError(message);
+  if (any({SQLITE_CORRUPT, SQLITE_NOTADB})) return absl::DataLossError(message);
+  if (any({SQLITE_CONSTRAINT})) return absl::FailedPreconditionError(message);
+  if (any({SQLITE_READONLY, SQLITE_PERM, SQLITE_AUTH})) return absl::PermissionDeniedError(message);
+  return absl::InternalError(message);
 }
 
 StatusOr<Connection> Connection::open(const std::string& path, const ConnectionOptions& options) {

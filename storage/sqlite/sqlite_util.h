@@ -11,6 +11,7 @@
 
 #include <sqlite3.h>
 
+#include "absl/strings/str_format.h"
 #include "core/common/status.h"
 
 namespace objdb::storage {
@@ -48,6 +49,13 @@ class Connection {
 class Statement {
  public:
   static StatusOr<Statement> prepare(const Connection& connection, std::string_view sql);
+  // The statement absl::StrFormat makes of `format` and `args` (names and SQL, never values:
+  // those are bound).
+  template <typename... Args>
+  static StatusOr<Statement> prepare(const Connection& connection,
+                                     const absl::FormatSpec<Args...>& format, const Args&... args) {
+    return prepare(connection, absl::StrFormat(format, args...));
+  }
   Statement(Statement&& other) noexcept : db_(other.db_), stmt_(other.stmt_) {
     other.stmt_ = nullptr;
   }

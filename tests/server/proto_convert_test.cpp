@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <set>
+#include <string>
+
 namespace objdb::server {
 namespace {
 
@@ -20,6 +23,25 @@ database::CandidateResult accepted(int64_t id, double rmse, size_t overlap) {
   r.colour.chromatic_pairs = overlap / 4;
   r.colour.median_distance = rmse;
   return r;
+}
+
+// GetStats fills InsertTimingTotals.<stage>_s from each stage of InsertTimings by name: every
+// stage has its field, and every field of seconds has its stage.
+TEST(InsertTimingTotals, EveryStageHasItsFieldAndEveryFieldItsStage) {
+  const google::protobuf::Descriptor* totals = v1::InsertTimingTotals::descriptor();
+  std::set<std::string> stages;
+  for (const auto& [stage, member] : database::kInsertStages) {
+    const std::string field = std::string(stage) + "_s";
+    stages.insert(field);
+    const google::protobuf::FieldDescriptor* f = totals->FindFieldByName(field);
+    ASSERT_NE(f, nullptr) << field;
+    EXPECT_EQ(f->type(), google::protobuf::FieldDescriptor::TYPE_DOUBLE) << field;
+  }
+  for (int i = 0; i < totals->field_count(); ++i) {
+    const google::protobuf::FieldDescriptor* f = totals->field(i);
+    if (f->type() != google::protobuf::FieldDescriptor::TYPE_DOUBLE) continue;
+    EXPECT_EQ(stages.count(f->name()), 1u) << f->name() << " has no stage";
+  }
 }
 
 TEST(ObjectEvents, ANewObjectIsCreated) {

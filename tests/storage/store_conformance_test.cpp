@@ -259,6 +259,24 @@ TEST_P(StoreConformance, AnAbsorbedModelIsKeptAsMergedIntoItsTargetInOneUnit) {
   EXPECT_EQ(store->stats().value().merged_models, 1);
 }
 
+TEST_P(StoreConformance, RawSegmentKeysComeInTheOrderTheirRowsWereCreated) {
+  const std::string target = freshTarget();
+  auto store = open(target);
+  ASSERT_NE(store, nullptr);
+  EXPECT_TRUE(store->rawSegmentKeys().value().empty());
+  ASSERT_TRUE(store->putRawSegment(makeRawSegment("tuesday", 9, 1)).ok());
+  ASSERT_TRUE(store->putRawSegment(makeRawSegment("monday", 4, 2)).ok());
+  ASSERT_TRUE(store->putRawSegment(makeRawSegment("tuesday", 2, 3)).ok());
+  // A re-extraction keeps its row, and so its place.
+  ASSERT_TRUE(store->putRawSegment(makeRawSegment("tuesday", 9, 4)).ok());
+  const std::vector<database::SegmentKey> expected = {{"tuesday", 9}, {"monday", 4}, {"tuesday", 2}};
+  EXPECT_EQ(store->rawSegmentKeys().value(), expected);
+  store.reset();
+  store = open(target);
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(store->rawSegmentKeys().value(), expected);
+}
+
 TEST_P(StoreConformance, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   const std::string target = freshTarget();
   auto store = open(target);
