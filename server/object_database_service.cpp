@@ -369,13 +369,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     logger("server")->debug("session {}: segment {} stored without a model: {}", session.name,
                             segment.label, report->unusable_reason);
     if (stream != nullptr && report->removed_model != 0) {
-      const auto segment_id = store_->rawSegmentId({session.name, segment.label});
-      const uint64_t id = segment_id.ok() ? uint64_t(*segment_id) : 0;
-      for (v1::ObjectEvent& o : objectEvents(*report, id)) {
-        v1::IngestResponse event;
-        *event.mutable_object() = std::move(o);
-        stream->send(std::move(event));
-      }
+      sendObjectEvents(stream, objectEvents(*report, segmentIdOf(session.name, segment.label)));
     }
     return absl::OkStatus();
   }
@@ -393,7 +387,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     insert_timings_ += report->timings;
     ++inserts_;
   }
-  const auto segment_id = store_->rawSegmentId({session.name, segment.label});
+  const uint64_t segment_id = segmentIdOf(session.name, segment.label);
   {
     std::lock_guard lock(session.mutex);
     v1::SessionCounters& c = session.counters;
@@ -409,7 +403,7 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
   if (stream == nullptr) return absl::OkStatus();
   v1::IngestResponse extracted;
   v1::SegmentExtracted& e = *extracted.mutable_segment();
-  e.set_segment_id(segment_id.ok() ? uint64_t(*segment_id) : 0);
+  e.set_segment_id(segment_id);
   e.set_gsm_label(segment.label);
   e.set_reason(job.reason);
   e.set_last_frame_index(job.last_frame_index);
@@ -430,12 +424,22 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
     setVector(hi + half, e.mutable_bounds_world()->mutable_max());
   }
   stream->send(std::move(extracted));  // moves `e` away
-  for (v1::ObjectEvent& o : objectEvents(*report, segment_id.ok() ? uint64_t(*segment_id) : 0)) {
+  sendObjectEvents(stream, objectEvents(*report, segment_id));
+  return absl::OkStatus();
+}
+
+uint64_t ObjectDatabaseService::segmentIdOf(const std::string& session, gsm::Label label) const {
+  const auto id = store_->rawSegmentId({session, label});
+  return id.ok() ? uint64_t(*id) : 0;
+}
+
+void ObjectDatabaseService::sendObjectEvents(IngestStream* stream,
+                                             std::vector<v1::ObjectEvent> events) {
+  for (v1::ObjectEvent& o : events) {
     v1::IngestResponse event;
     *event.mutable_object() = std::move(o);
     stream->send(std::move(event));
   }
-  return absl::OkStatus();
 }
 
 Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* stream,
@@ -459,11 +463,8 @@ Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* strea
     }
   }
   if (withdrawn->removed && stream != nullptr) {  // it was the object's only segment
-    const auto segment_id = store_->rawSegmentId({session.name, label});
-    v1::IngestResponse event;
-    *event.mutable_object() =
-        removedEvent(withdrawn->model_id, 0, segment_id.ok() ? uint64_t(*segment_id) : 0);
-    stream->send(std::move(event));
+    sendObjectEvents(stream,
+                     {removedEvent(withdrawn->model_id, 0, segmentIdOf(session.name, label))});
   }
   return absl::OkStatus();
 }

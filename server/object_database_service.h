@@ -216,6 +216,10 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // storage failures (a segment the database cannot take is skipped, OK).
   Status insert(LiveSession& session, IngestStream* stream, RawSegmentJob& job);
   // A segment the GSM withdrew, given back by the database (counted in segments_withdrawn).
+  // The id of a stored raw segment (0 when the store has none or cannot say).
+  uint64_t segmentIdOf(const std::string& session, gsm::Label label) const;
+  // Sends each event on the session's stream, in order.
+  static void sendObjectEvents(IngestStream* stream, std::vector<v1::ObjectEvent> events);
   Status withdraw(LiveSession& session, IngestStream* stream, gsm::Label label);
   // Runs on the database thread: extract everything, insert, store the scene, end the session.
   Status flush(LiveSession& session);
