@@ -82,6 +82,9 @@ int stats(v1::ObjectDatabase::Stub& stub, const Options& o) {
               s.insert_timings().writer_wait_s(), s.insert_timings().writer_hold_s());
   std::printf("leases: %llu sessions of stopped servers taken over, %llu leases lost\n",
               (unsigned long long)s.sessions_taken_over(), (unsigned long long)s.leases_lost());
+  std::printf("live maps across servers: %llu published (%.2f s), %llu of other servers read\n",
+              (unsigned long long)s.maps_published(), s.map_publish_s(),
+              (unsigned long long)s.published_maps_read());
   return 0;
 }
 

@@ -28,7 +28,7 @@
 #include "client/merge_sheet.h"
 #include "client/commands.h"
 #include "core/io/dataset.h"
-#include "storage/sqlite/sqlite_store.h"
+#include "storage/open_store.h"
 
 namespace objdb {
 namespace {
@@ -54,7 +54,8 @@ mergeable segments that share a model with their kind at another place: two plac
 session within 5 cm are one object under two GSM labels) and, per kind, the models it ends in
 and the models per true object.
 
-  --db FILE         the database (objdb-server's --db, or a backup of it)
+  --db FILE|URI     the database (objdb-server's --db, or a backup of it): an SQLite file or a
+                    postgresql:// URI
   --out FILE.png    the sheet
   --max-rows N      at most N models, the ones with the most placements first (default 40)
   --every N         look for the best view in every N-th frame (default 1)
@@ -105,6 +106,15 @@ int parseOptions(int argc, char** argv, Options* o) {
   return -1;
 }
 
+// The database, read-only for an SQLite file (nothing is written to a PostgreSQL one either).
+StatusOr<std::unique_ptr<storage::Store>> openReadOnly(const std::string& db) {
+  storage::StoreOptions options;
+  options.sqlite.read_only = true;
+  options.sqlite.create_if_missing = false;
+  options.postgres.pool_size = 1;
+  return storage::openStore(db, options);
+}
+
 int merges(int argc, char** argv) {
   Options o;
   if (const int parsed = parseOptions(argc, argv, &o); parsed >= 0) return parsed;
@@ -113,9 +123,7 @@ int merges(int argc, char** argv) {
   }
   const std::string& db_path = o.db_path;
   const std::string& out = o.out;
-  storage::SqliteStoreOptions options;
-  options.read_only = true;
-  auto store = storage::SqliteStore::open(db_path, options);
+  auto store = openReadOnly(db_path);
   if (!store.ok()) return cli::reportError(kCommand, store.status());
   auto loaded = cli::loadRows(**store, o.min_segments, o.max_rows);
   if (!loaded.ok()) return cli::reportError(kCommand, loaded.status());
@@ -157,9 +165,7 @@ int truth(int argc, char** argv) {
   if (o.db_path.empty()) return cli::usageError(kCommand, "--db is required", kUsage);
   auto truth = cli::readGroundTruth(o.datasets);
   if (!truth.ok()) return cli::reportError(kCommand, truth.status());
-  storage::SqliteStoreOptions options;
-  options.read_only = true;
-  auto store = storage::SqliteStore::open(o.db_path, options);
+  auto store = openReadOnly(o.db_path);
   if (!store.ok()) return cli::reportError(kCommand, store.status());
   auto loaded = cli::loadRows(**store, 1, SIZE_MAX);
   if (!loaded.ok()) return cli::reportError(kCommand, loaded.status());

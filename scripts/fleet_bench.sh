@@ -7,6 +7,7 @@
 # so that every segment is inserted once and its stored version is the one that was inserted:
 # then the replay must match exactly. merging.noise_sigmas is 0 on both sides: a raw segment row
 # does not keep the session's measured noise scale, which the live insert used.
+# The fleet's models are also scored against the lounge's ground truth (objdb report truth).
 # Usage: [SERVERS=4] scripts/fleet_bench.sh   (needs the Debian package postgresql; the fourth
 # session is the lounge's session_1 rendered with another noise seed, generated when missing)
 set -euo pipefail
@@ -91,10 +92,14 @@ for n in 1 2 3 4; do
 done
 for ((s = 1; s <= SERVERS; s++)); do
   "$OBJDB" remote stats --server "${ADDRESSES[$((s - 1))]}" |
-    sed -n -e "s/^\(inserts: .*\)/  server $s: \1/p" -e "s/^\(.*without a scene.*\)/  server $s: \1/p"
+    sed -n -e "s/^\(inserts: .*\)/  server $s: \1/p" -e "s/^\(.*without a scene.*\)/  server $s: \1/p" \
+      -e "s/^\(live maps across .*\)/  server $s: \1/p"
 done
 for pid in "${PIDS[@]}"; do kill -TERM "$pid" 2>/dev/null || true; done
 for pid in "${PIDS[@]}"; do wait "$pid" 2>/dev/null || true; done
 PIDS=()
+echo "what the fleet stored, against the lounge's ground truth (objdb report truth):"
+"$OBJDB" report truth --db "$uri" $(for n in 1 2 3 4; do echo "session_$n=$work/sessions/session_$n"; done) |
+  sed 's/^/  /'
 echo "the reference order (objdb db replay):"
 "$OBJDB" db replay --db "$uri" --config "$work/server.json"

@@ -279,6 +279,7 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
     }
   }
   OBJDB_RETURN_IF_ERROR(startPipeline(*session, options_.integration_threads));
+  session->publish_scenes = store_->sharedByServers();
   OBJDB_RETURN_IF_ERROR(leaseNewSession(session->name));
 
   {
@@ -340,15 +341,29 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
   const gsm::RawSegment& segment = job.segment;
   if (session.leaseLost()) return lostLease(session.name);
   if (job.withdraw) return withdraw(session, stream, segment.label);
+  if (job.publish != nullptr && !session.flush_scene_stored) {
+    // Before the segments extracted with it go in (server/session/published_scenes.h).
+    if (Status published =
+            published_scenes_.publish(session.name, *job.publish, &session.saved_base);
+        !published.ok()) {
+      logger("server")->warn("session {}: publishing its map for the other servers failed (they "
+                             "verify against an older one): {}",
+                             session.name, std::string(published.message()));
+    } else {
+      session.map_saved_frames = job.publish->frames;
+    }
+  }
   // Model-to-scene verification on the live path: this session's poses against the map as it
-  // was when the segment was extracted, another live session's against its newest snapshot,
-  // ended sessions' against their stored scenes (the database asks the store for those).
+  // was when the segment was extracted, another live session's against its newest snapshot
+  // (published by its server when that is another), ended sessions' against their stored scenes
+  // (the database asks the store for those).
+  const bool shared = store_->sharedByServers();
   const database::LiveScenes live =
-      [this, &session, own = job.scene](
+      [this, &session, shared, own = job.scene](
           const std::string& name) -> std::shared_ptr<const tsdf::TsdfLayer> {
     if (name == session.name) return own != nullptr ? own : session.currentScene();
     if (std::shared_ptr<LiveSession> other = liveSession(name)) return other->currentScene();
-    return nullptr;
+    return shared ? published_scenes_.scene(name) : nullptr;
   };
   auto report = db_->insertSegment(session.name, segment, live);
   if (!report.ok()) {

@@ -40,6 +40,7 @@
 #include "core/database/object_database.h"
 #include "objdb/v1/objdb.grpc.pb.h"
 #include "server/query_pool.h"
+#include "server/session/published_scenes.h"
 #include "storage/store.h"
 
 namespace objdb::database {
@@ -235,6 +236,7 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   const ServiceOptions options_;
   storage::Store* store_;
   std::unique_ptr<database::ObjectDatabase> db_;  // used on the database thread only
+  PublishedScenes published_scenes_{store_};  // live maps across servers
   const std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
 
   std::mutex mutex_;  // guards sessions_, recovering_, workers_, stopped_

@@ -455,6 +455,10 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetStats(grpc::CallbackServerCo
     response->set_segments_unusable(segments_unusable_.load());
     response->set_insert_errors(insert_errors_.load());
     response->set_queries_refused(queries_refused_.load());
+    const PublishedScenes::Counters published = published_scenes_.counters();
+    response->set_maps_published(published.published);
+    response->set_map_publish_s(published.publish_ms / 1000);
+    response->set_published_maps_read(published.read);
     return absl::OkStatus();
   };
   return answerAuthorized(context, run);

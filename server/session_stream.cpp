@@ -251,7 +251,7 @@ void ObjectDatabaseService::writeSavedMap(const std::shared_ptr<LiveSession>& se
                                           const MapCopy& copy) {
   if (!session->ended()) {
     const auto start = std::chrono::steady_clock::now();
-    const Status saved = store_->putSavedMap(session->name, copy.frames, *copy.map, *copy.labels);
+    const Status saved = writeSavedMapOf(*store_, session->name, copy, &session->saved_base);
     if (saved.ok()) {
       session->map_saved_frames = copy.frames;
       logger("server")->info(

@@ -34,4 +34,11 @@ Status checkOptionRange(std::string_view name, int64_t value, int64_t min, int64
       absl::StrFormat("storage.%s must be in [%d, %d], got %d", name, min, max, value));
 }
 
+Status Store::updateSavedMap(const std::string& session, int64_t frames,
+                             const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels,
+                             const tsdf::TsdfLayer& /*base_map*/,
+                             const gsm::LabelBlocks& /*base_labels*/) {
+  return putSavedMap(session, frames, map, labels);
+}
+
 }  // namespace objdb::storage

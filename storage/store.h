@@ -143,6 +143,9 @@ class Store : public database::ModelStore {
   virtual std::string describe() const = 0;
   // Bytes the database takes on disk now (SqliteStore: the file, its -wal and its -shm).
   virtual int64_t diskBytes() const = 0;
+  // Whether several servers may share the database (PostgresStore; a SqliteStore's file is
+  // locked by one). Servers then publish their live maps for each other.
+  virtual bool sharedByServers() const { return false; }
 
   // The merge records whose target is model `target`, oldest first.
   virtual StatusOr<std::vector<database::MergeRecord>> mergeRecordsInto(int64_t target) const = 0;
@@ -152,6 +155,15 @@ class Store : public database::ModelStore {
   // it, and finishSession(kEnded) deletes it.
   virtual Status putSavedMap(const std::string& session, int64_t frames,
                              const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels) = 0;
+  // The saved map of `session` brought from `base` (the map and labels of the last successful
+  // putSavedMap or updateSavedMap of it) to `map` and `labels`: only the blocks that differ are
+  // written (a TSDF block differs when it is not the base's block: snapshots share unchanged
+  // blocks; a label block when its labels do). FAILED_PRECONDITION when no saved map of that grid
+  // is stored (then putSavedMap). The default writes the whole map (putSavedMap).
+  virtual Status updateSavedMap(const std::string& session, int64_t frames,
+                                const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels,
+                                const tsdf::TsdfLayer& base_map,
+                                const gsm::LabelBlocks& base_labels);
   virtual StatusOr<SavedMap> savedMap(const std::string& session) const = 0;
   // The frame count of the session's saved map without reading it; −1 when none is saved.
   virtual StatusOr<int64_t> savedMapFrames(const std::string& session) const = 0;

@@ -174,11 +174,21 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
     std::lock_guard lock(session.mutex);
     session.scene = scene;
   }
+  std::shared_ptr<const MapCopy> publish;
+  if (session.publish_scenes) {
+    const auto start = std::chrono::steady_clock::now();
+    MapCopy copy{scene, std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks()),
+                 session.map->frames()};
+    copy.copy_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    publish = std::make_shared<const MapCopy>(std::move(copy));
+  }
   for (auto& segment : segments) {
     const size_t frame = size_t(std::max<int64_t>(segment.last_update_frame, 0));
     const uint64_t index =
         frame < session.frame_indices.size() ? session.frame_indices[frame] : session.last_index;
-    jobs.push_back({std::move(segment), reason, index, scene, /*withdraw=*/false});
+    jobs.push_back({std::move(segment), reason, index, scene, /*withdraw=*/false, publish});
+    publish = nullptr;  // once, before the first of them
   }
   return jobs;
 }

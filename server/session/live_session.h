@@ -30,6 +30,14 @@ namespace objdb::server {
 
 struct IngestStream;
 
+// A copy of a live map to save, made by the thread that owns the map.
+struct MapCopy {
+  std::shared_ptr<const tsdf::TsdfLayer> map;
+  std::shared_ptr<const gsm::LabelBlocks> labels;
+  int64_t frames = 0;
+  double copy_ms = 0.0;
+};
+
 // A raw segment waiting for the database, with why it was extracted.
 struct RawSegmentJob {
   gsm::RawSegment segment;
@@ -41,6 +49,10 @@ struct RawSegmentJob {
   // Not a segment to insert: the GSM withdrew segment.label (gsm::Gsm::takeWithdrawn), whose
   // earlier segment the database gives back.
   bool withdraw = false;
+  // Several servers on one database: `scene` with its main labels, published as the session's
+  // saved map before this job (the first of its extraction) is inserted, so that other servers
+  // verify poses in this live session against the map this server verifies them against.
+  std::shared_ptr<const MapCopy> publish;
 };
 
 // One session with a map in memory: from its header until EndSession.
@@ -50,6 +62,9 @@ struct LiveSession {
   Params params;
   std::string client_info;
   double started_unix_s = 0.0;
+  // The store is shared by several servers: each extraction's map snapshot is published
+  // (RawSegmentJob::publish).
+  bool publish_scenes = false;
 
   // Used by one thread at a time: the stream's frame worker, then (after it) the database thread.
   std::optional<segmentation::DepthSegmenter> segmenter;
@@ -87,6 +102,9 @@ struct LiveSession {
   std::chrono::steady_clock::time_point map_saved_at{};
   std::atomic<bool> map_save_pending{false};
   std::atomic<int64_t> map_saved_frames{0};
+  // The database thread's: the map last written as the saved map, the base of the next write
+  // (only the blocks that changed since are written; none: the whole map).
+  std::optional<MapCopy> saved_base;
   int64_t idle_save_tried = -1;  // frame count the janitor last queued a save for (mutex)
 
   v1::SessionCounters snapshot() {
@@ -138,18 +156,12 @@ Status integrateFrame(LiveSession& session, const v1::Frame& frame, const Prepar
                       v1::FrameAck* ack);
 
 // Step 4: the segments idle for the GSM's idle time (every live one with `everything`), as jobs
-// that share one snapshot of the map, which also becomes session.scene. Runs on the thread that
-// owns the map.
+// that share one snapshot of the map, which also becomes session.scene (and, with
+// session.publish_scenes, the first job's `publish`, with the map's main labels). Runs on the
+// thread that owns the map.
 std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything,
                                            v1::SegmentExtracted::Reason reason);
 
-// A copy of a live map to save, made by the thread that owns the map.
-struct MapCopy {
-  std::shared_ptr<const tsdf::TsdfLayer> map;
-  std::shared_ptr<const gsm::LabelBlocks> labels;
-  int64_t frames = 0;
-  double copy_ms = 0.0;
-};
 MapCopy copyMap(const gsm::Gsm& map);
 
 // Whether a stored raw segment is `segment`: the same pose (hence the same grid origin), the same

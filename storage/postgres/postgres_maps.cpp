@@ -18,15 +18,10 @@ namespace {
 // Block rows per INSERT statement (5 parameters each; PostgreSQL takes up to 65535).
 constexpr size_t kBlocksPerInsert = 256;
 
-// Session `sid`'s rows of a block table replaced by `rows`, inside the caller's transaction.
-Status replaceBlocks(const pg::Connection& c, int64_t sid, const char* table, const char* column,
-                     const std::vector<EncodedBlock>& rows) {
-  Params del;
-  del.add(sid);
-  OBJDB_RETURN_IF_ERROR(
-      c.exec(absl::StrFormat("DELETE FROM %s WHERE session_id = $1", table), del,
-             absl::StrFormat("clearing %s", table))
-          .status());
+// `rows` inserted into session `sid`'s rows of a block table, inside the caller's transaction;
+// with `upsert` a row already there for a block is replaced.
+Status insertBlocks(const pg::Connection& c, int64_t sid, const char* table, const char* column,
+                    const std::vector<EncodedBlock>& rows, bool upsert) {
   for (size_t first = 0; first < rows.size(); first += kBlocksPerInsert) {
     const size_t n = std::min(kBlocksPerInsert, rows.size() - first);
     std::string values;
@@ -39,13 +34,30 @@ Status replaceBlocks(const pg::Connection& c, int64_t sid, const char* table, co
       p.add(sid).add(int64_t(b.index.x())).add(int64_t(b.index.y())).add(int64_t(b.index.z()));
       p.bytes(b.blob);
     }
+    const std::string conflict =
+        upsert ? absl::StrFormat(" ON CONFLICT (session_id, bx, by, bz) DO UPDATE SET %s = "
+                                 "excluded.%s",
+                                 column, column)
+               : std::string();
     OBJDB_RETURN_IF_ERROR(
-        c.exec(absl::StrFormat("INSERT INTO %s(session_id, bx, by, bz, %s) VALUES %s", table,
-                               column, values),
+        c.exec(absl::StrFormat("INSERT INTO %s(session_id, bx, by, bz, %s) VALUES %s%s", table,
+                               column, values, conflict),
                p, absl::StrFormat("storing %s", table))
             .status());
   }
   return absl::OkStatus();
+}
+
+// Session `sid`'s rows of a block table replaced by `rows`, inside the caller's transaction.
+Status replaceBlocks(const pg::Connection& c, int64_t sid, const char* table, const char* column,
+                     const std::vector<EncodedBlock>& rows) {
+  Params del;
+  del.add(sid);
+  OBJDB_RETURN_IF_ERROR(
+      c.exec(absl::StrFormat("DELETE FROM %s WHERE session_id = $1", table), del,
+             absl::StrFormat("clearing %s", table))
+          .status());
+  return insertBlocks(c, sid, table, column, rows, /*upsert=*/false);
 }
 
 // The map of `tables` for `session` rewritten from `encoded`, in one write transaction.
@@ -169,6 +181,91 @@ Status PostgresStore::putSavedMap(const std::string& session, int64_t frames,
       encodeMap(absl::StrFormat("saved map of session %s", session), map, &labels, options_.blobs);
   if (!encoded.ok()) return annotate(encoded.status(), context);
   return writeMap(*impl_, kSavedTables, session, *encoded, frames, context);
+}
+
+namespace {
+
+// Session `sid`'s rows of a block table at `gone` deleted and `rows` written over (inserted or
+// replaced), inside the caller's transaction.
+Status patchBlocks(const pg::Connection& c, int64_t sid, const char* table, const char* column,
+                   const std::vector<tsdf::BlockIndex>& gone, const std::vector<EncodedBlock>& rows) {
+  for (size_t first = 0; first < gone.size(); first += kBlocksPerInsert) {
+    const size_t n = std::min(kBlocksPerInsert, gone.size() - first);
+    std::string values;
+    Params p;
+    p.add(sid);
+    for (size_t k = 0; k < n; ++k) {
+      const tsdf::BlockIndex& b = gone[first + k];
+      const size_t base = 2 + 3 * k;
+      absl::StrAppend(&values, k ? ", " : "", "($", base, "::integer, $", base + 1,
+                      "::integer, $", base + 2, "::integer)");
+      p.add(int64_t(b.x())).add(int64_t(b.y())).add(int64_t(b.z()));
+    }
+    OBJDB_RETURN_IF_ERROR(
+        c.exec(absl::StrFormat("DELETE FROM %s WHERE session_id = $1 AND (bx, by, bz) IN (%s)",
+                               table, values),
+               p, absl::StrFormat("deleting rows of %s", table))
+            .status());
+  }
+  return insertBlocks(c, sid, table, column, rows, /*upsert=*/true);
+}
+
+}  // namespace
+
+Status PostgresStore::updateSavedMap(const std::string& session, int64_t frames,
+                                     const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels,
+                                     const tsdf::TsdfLayer& base_map,
+                                     const gsm::LabelBlocks& base_labels) {
+  const std::string context = absl::StrFormat("saving the live map of session %s", session);
+  if (map.voxelSize() != base_map.voxelSize() ||
+      map.voxelsPerSide() != base_map.voxelsPerSide()) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: the base map has another grid", context));
+  }
+  // The difference, encoded as putSavedMap would encode those blocks.
+  EncodedMap changed;
+  std::vector<tsdf::BlockIndex> tsdf_gone, labels_gone;
+  for (const auto& [index, block] : map.blocks()) {
+    const auto it = base_map.blocks().find(index);
+    if (it == base_map.blocks().end() || it->second != block) {
+      changed.tsdf.push_back({index, encodeTsdfBlock(*block, options_.blobs)});
+    }
+  }
+  for (const auto& [index, block] : base_map.blocks()) {
+    if (!map.blocks().contains(index)) tsdf_gone.push_back(index);
+  }
+  const size_t voxels = size_t(map.voxelsPerSide()) * map.voxelsPerSide() * map.voxelsPerSide();
+  for (const auto& [index, block] : labels) {
+    const auto it = base_labels.find(index);
+    if (it != base_labels.end() && it->second == block) continue;
+    if (block.size() != voxels) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s: label block (%d, %d, %d) has %d labels, the grid's blocks %d", context, index.x(),
+          index.y(), index.z(), block.size(), voxels));
+    }
+    changed.labels.push_back({index, encodeLabelBlock(block, options_.blobs)});
+  }
+  for (const auto& [index, block] : base_labels) {
+    if (!labels.contains(index)) labels_gone.push_back(index);
+  }
+  return impl_->write(context, [&](const pg::Connection& c) -> Status {
+    OBJDB_ASSIGN_OR_RETURN(const int64_t sid, pgstore::sessionIdForWrite(c, session));
+    Params p;
+    p.add(sid).add(frames).add(int64_t(map.numBlocks()));
+    p.add(double(map.voxelSize())).add(int64_t(map.voxelsPerSide()));
+    OBJDB_ASSIGN_OR_RETURN(
+        Result updated,
+        c.exec(absl::StrFormat("UPDATE %s SET frames = $2, blocks = $3, updated_at = %s "
+                               "WHERE session_id = $1 AND voxel_size = $4 AND voxels_per_side = $5",
+                               kSavedTables.maps, pg::kNow),
+               p, "updating the saved map row"));
+    if (updated.affected() != 1) {
+      return absl::FailedPreconditionError(
+          absl::StrFormat("%s: no saved map of this grid to update", context));
+    }
+    OBJDB_RETURN_IF_ERROR(patchBlocks(c, sid, kSavedTables.blocks, "tsdf", tsdf_gone, changed.tsdf));
+    return patchBlocks(c, sid, kSavedTables.label_blocks, "labels", labels_gone, changed.labels);
+  });
 }
 
 StatusOr<SavedMap> PostgresStore::savedMap(const std::string& session) const {

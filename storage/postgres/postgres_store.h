@@ -70,6 +70,11 @@ class PostgresStore : public Store {
   //   otherwise. BackupReport::pages is 0, bytes the archive's size. Continuous archiving or
   //   pg_basebackup remain the tools for point-in-time recovery.
 #include "storage/store_overrides.inc"
+  bool sharedByServers() const override { return true; }
+  // Writes the blocks that differ from the base, in one transaction (postgres_maps.cpp).
+  Status updateSavedMap(const std::string& session, int64_t frames, const tsdf::TsdfLayer& map,
+                        const gsm::LabelBlocks& labels, const tsdf::TsdfLayer& base_map,
+                        const gsm::LabelBlocks& base_labels) override;
   // Several servers on one database (postgres_fleet.cpp): the writer lock is a PostgreSQL
   // advisory lock on a connection of its own (released by the database if that connection or
   // this process dies); the model changes are read from the models' change sequence.

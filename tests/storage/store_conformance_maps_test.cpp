@@ -41,6 +41,24 @@ tsdf::TsdfLayer smallMap(int seed) {
   return layer;
 }
 
+// Whether `store`'s saved map of `session` is `map` with `labels` after `frames` frames.
+::testing::AssertionResult savedIs(const Store& store, const std::string& session, int64_t frames,
+                                   const tsdf::TsdfLayer& map, const gsm::LabelBlocks& labels) {
+  const auto saved = store.savedMap(session);
+  if (!saved.ok()) return ::testing::AssertionFailure() << saved.status();
+  if (saved->frames != frames) {
+    return ::testing::AssertionFailure() << "frames " << saved->frames << ", expected " << frames;
+  }
+  if (saved->map == nullptr) return ::testing::AssertionFailure() << "no saved map";
+  if (const std::string diff = diffLayers(*saved->map, map); !diff.empty()) {
+    return ::testing::AssertionFailure() << diff;
+  }
+  if (saved->labels == nullptr || !(*saved->labels == labels)) {
+    return ::testing::AssertionFailure() << "the labels differ";
+  }
+  return ::testing::AssertionSuccess();
+}
+
 TEST_P(StoreConformance, SessionsHaveALifecycle) {
   const std::string target = freshTarget();
   auto store = open(target);
@@ -184,14 +202,7 @@ TEST_P(StoreConformance, SavedLiveMapsRoundTripStayApartFromScenesAndGoWhenTheSe
   wrong.begin()->second.pop_back();
   EXPECT_EQ(store->putSavedMap("monday", 51, smaller, wrong).code(),
             absl::StatusCode::kInvalidArgument);
-  {
-    const auto saved = store->savedMap("monday").value();
-    EXPECT_EQ(saved.frames, 50);
-    ASSERT_NE(saved.map, nullptr);
-    EXPECT_EQ(diffLayers(*saved.map, smaller), "");
-    ASSERT_NE(saved.labels, nullptr);
-    EXPECT_TRUE(*saved.labels == smaller_labels);
-  }
+  EXPECT_TRUE(savedIs(*store, "monday", 50, smaller, smaller_labels));
   EXPECT_EQ(store->savedMapFrames("monday").value(), 50);
   // Dropped on request (another session's save stays).
   ASSERT_TRUE(store->putSavedMap("tuesday", 7, map, labels).ok());
@@ -208,6 +219,76 @@ TEST_P(StoreConformance, SavedLiveMapsRoundTripStayApartFromScenesAndGoWhenTheSe
   const StoreStats stats = store->stats().value();
   EXPECT_EQ(tableRows(stats, "saved_blocks"), 0);
   EXPECT_EQ(tableRows(stats, "saved_label_blocks"), 0);
+}
+
+// An incremental save (updateSavedMap) reads back as the whole new map: blocks shared with the
+// base kept, changed and new blocks written, blocks the new map lacks deleted, label blocks
+// likewise. Without a saved map to update, a store writes the whole map or refuses with
+// FAILED_PRECONDITION and writes nothing.
+TEST_P(StoreConformance, AnIncrementalSaveReadsBackAsTheWholeNewMap) {
+  const std::string target = freshTarget();
+  auto store = open(target);
+  ASSERT_NE(store, nullptr);
+  SessionInfo info;
+  info.name = "monday";
+  ASSERT_TRUE(store->beginSession(info).ok());
+
+  // The live map, its first snapshot saved whole.
+  tsdf::TsdfLayer live = tsdf::TsdfLayer::create(0.02f, 8).value();
+  for (int b = 0; b < 4; ++b) {
+    std::vector<tsdf::TsdfVoxel>& voxels = live.allocateBlock({b, -b, 2 * b}).voxels();
+    for (size_t i = 0; i < voxels.size(); i += 3) {
+      voxels[i].distance = 0.01f * float(int(i % 7) - 3);
+      voxels[i].weight = 1.0f + float(b);
+    }
+  }
+  const tsdf::TsdfLayer first = live.snapshot();
+  const gsm::LabelBlocks first_labels = labelsFor(first, 5, 7);
+  ASSERT_TRUE(store->putSavedMap("monday", 10, first, first_labels).ok());
+
+  // Ten frames later: one block changed, one new; one label block changed, one gone.
+  const tsdf::BlockIndex changed = first.blocks().begin()->first;
+  live.block(changed)->voxels()[3].distance = 0.25f;
+  live.block(changed)->voxels()[3].weight = 9.0f;
+  live.allocateBlock({40, 41, 42}).voxels()[7].weight = 2.0f;
+  const tsdf::TsdfLayer second = live.snapshot();
+  gsm::LabelBlocks second_labels = labelsFor(second, 5, 7);
+  second_labels[changed][1] = 99;
+  second_labels.erase(std::next(first.blocks().begin())->first);
+  const Status updated = store->updateSavedMap("monday", 20, second, second_labels, first,
+                                               first_labels);
+  ASSERT_TRUE(updated.ok()) << updated;
+  EXPECT_TRUE(savedIs(*store, "monday", 20, second, second_labels));
+  EXPECT_EQ(store->savedMapFrames("monday").value(), 20);
+
+  // A new map lacking blocks of its base: those are deleted (here every block is another
+  // object than the base's, so all are written again).
+  tsdf::TsdfLayer third = smallMap(4);
+  const gsm::LabelBlocks third_labels = labelsFor(third, 2, 1);
+  ASSERT_TRUE(store->updateSavedMap("monday", 30, third, third_labels, second, second_labels).ok());
+  EXPECT_TRUE(savedIs(*store, "monday", 30, third, third_labels));
+  const auto report = store->check();
+  ASSERT_TRUE(report.ok()) << report.status();
+  EXPECT_TRUE(report->ok());
+
+  // A label block of the wrong size: INVALID_ARGUMENT, the saved map unchanged.
+  gsm::LabelBlocks wrong = third_labels;
+  wrong.begin()->second.pop_back();
+  EXPECT_EQ(store->updateSavedMap("monday", 31, third, wrong, third, third_labels).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(store->savedMapFrames("monday").value(), 30);
+
+  // Nothing saved to update: the whole map, or FAILED_PRECONDITION and nothing.
+  info.name = "tuesday";
+  ASSERT_TRUE(store->beginSession(info).ok());
+  const Status fresh = store->updateSavedMap("tuesday", 5, second, second_labels, first,
+                                             first_labels);
+  if (fresh.ok()) {
+    EXPECT_TRUE(savedIs(*store, "tuesday", 5, second, second_labels));
+  } else {
+    EXPECT_EQ(fresh.code(), absl::StatusCode::kFailedPrecondition) << fresh;
+    EXPECT_EQ(store->savedMapFrames("tuesday").value(), -1);
+  }
 }
 
 // The decoded-scene cache keeps the most recently used maps only: a long-lived server with many
