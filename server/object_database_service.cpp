@@ -77,6 +77,11 @@ ObjectDatabaseService::ObjectDatabaseService(const ServiceOptions& options,
                                           options_.scene_queue)),
       database_queue_(std::make_unique<JobQueue>()) {
   server_id_ = options_.server_id.empty() ? defaultServerId() : options_.server_id;
+  if (store_->sharedByServers()) {
+    // Until the lease keeper knows better, publish when others are at work (or unknown).
+    const auto others = store_->othersHoldLeases(server_id_);
+    publish_maps_ = !others.ok() || *others;
+  }
   if (options_.auto_end_after.count() > 0) janitor_ = std::thread([this] { endIdleSessions(); });
   keeper_ = std::thread([this] { keepLeases(); });
 }
@@ -103,6 +108,13 @@ void ObjectDatabaseService::endIdleSessions() {
               std::min<std::chrono::milliseconds>(options_.save_map_every, kIdleSaveDelay)) {
         session->map_save_pending = true;
         session->idle_save_tried = int64_t(session->counters.frames_integrated());  // once
+        database_queue_->push([this, session = session] { saveIdleMap(session); });
+      }
+      // Other servers came (publishLiveMaps): the map of a session whose stream is gone, now.
+      if (!session->streaming && !session->end_queued &&
+          session->state != v1::SESSION_STATE_ENDED && !session->map_save_pending &&
+          session->publish_requested.exchange(false)) {
+        session->map_save_pending = true;
         database_queue_->push([this, session = session] { saveIdleMap(session); });
       }
       if (session->streaming || session->end_queued ||
@@ -279,7 +291,7 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
     }
   }
   OBJDB_RETURN_IF_ERROR(startPipeline(*session, options_.integration_threads));
-  session->publish_scenes = store_->sharedByServers();
+  if (store_->sharedByServers()) session->publish_scenes = &publish_maps_;
   OBJDB_RETURN_IF_ERROR(leaseNewSession(session->name));
 
   {
@@ -341,18 +353,8 @@ Status ObjectDatabaseService::insert(LiveSession& session, IngestStream* stream,
   const gsm::RawSegment& segment = job.segment;
   if (session.leaseLost()) return lostLease(session.name);
   if (job.withdraw) return withdraw(session, stream, segment.label);
-  if (job.publish != nullptr && !session.flush_scene_stored) {
-    // Before the segments extracted with it go in (server/session/published_scenes.h).
-    if (Status published =
-            published_scenes_.publish(session.name, *job.publish, &session.saved_base);
-        !published.ok()) {
-      logger("server")->warn("session {}: publishing its map for the other servers failed (they "
-                             "verify against an older one): {}",
-                             session.name, std::string(published.message()));
-    } else {
-      session.map_saved_frames = job.publish->frames;
-    }
-  }
+  // Before the segments extracted with it go in (server/session/published_scenes.h).
+  if (job.publish != nullptr && !session.flush_scene_stored) storeSavedMap(session, *job.publish);
   // Model-to-scene verification on the live path: this session's poses against the map as it
   // was when the segment was extracted, another live session's against its newest snapshot
   // (published by its server when that is another), ended sessions' against their stored scenes

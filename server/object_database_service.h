@@ -175,8 +175,14 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   // Database thread: a session whose stream is gone, saved once more if frames came after its
   // last save (queued by the janitor).
   void saveIdleMap(const std::shared_ptr<LiveSession>& session);
-  // Database thread: stores one save (skipped when the session has ended meanwhile).
-  void writeSavedMap(const std::shared_ptr<LiveSession>& session, const MapCopy& copy);
+  // Database thread: stores one save (skipped when the session has ended meanwhile): the blocks
+  // changed since the last (writeSavedMapOf); counted as published while publish_maps_.
+  void storeSavedMap(LiveSession& session, const MapCopy& copy);
+  // Several servers on one database (the lease keeper's thread): live maps are published while
+  // another server holds a lease (server/session/published_scenes.h). When one comes, every
+  // live session's map is saved at once (by its frame worker, or by the janitor when its stream
+  // is gone), since the maps of its extractions so far were not published.
+  void updatePublication();
   // Database thread, at start: a session a stopped server left not ended, with a saved map, gets
   // that map's segments inserted and its scene stored, and stays INTERRUPTED.
   Status recoverSession(const storage::SessionInfo& stored);
@@ -237,6 +243,9 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   storage::Store* store_;
   std::unique_ptr<database::ObjectDatabase> db_;  // used on the database thread only
   PublishedScenes published_scenes_{store_};  // live maps across servers
+  // Another server holds a session lease on this (shared) database: extractions publish their
+  // maps (LiveSession::publish_scenes points here).
+  std::atomic<bool> publish_maps_{false};
   const std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
 
   std::mutex mutex_;  // guards sessions_, recovering_, workers_, stopped_

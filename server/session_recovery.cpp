@@ -216,6 +216,7 @@ void ObjectDatabaseService::keepLeases() {
       if (now - renewed_at >= options_.lease_ttl) lost.assign(leased.begin(), leased.end());
     }
     if (!lost.empty()) leasesLost(lost);
+    if (store_->sharedByServers()) updatePublication();
     // Open sessions no server renews the lease of: their server stopped.
     std::vector<storage::SessionInfo> orphans;
     if (takeovers && held.ok()) {
@@ -237,6 +238,32 @@ void ObjectDatabaseService::keepLeases() {
       }
     }
     lock.lock();
+  }
+}
+
+void ObjectDatabaseService::updatePublication() {
+  const auto others = store_->othersHoldLeases(server_id_);
+  if (!others.ok()) return;  // as it was (the renewal logs the database's trouble)
+  if (publish_maps_.exchange(*others) == *others) return;
+  if (!*others) {
+    logger("server")->info("no other server holds a session lease: live maps are no longer "
+                           "published");
+    return;
+  }
+  logger("server")->info("another server holds a session lease: live maps are published for its "
+                         "scene checks, each live session's at once");
+  std::lock_guard lock(mutex_);
+  for (auto& [name, session] : sessions_) {
+    std::lock_guard session_lock(session->mutex);
+    if (session->state == v1::SESSION_STATE_ENDED || session->end_queued) continue;
+    if (session->streaming) {
+      session->publish_requested = true;  // its frame worker saves it at the next frame
+    } else if (!session->map_save_pending) {
+      session->map_save_pending = true;  // the map is the database thread's
+      database_queue_->push([this, session = session] { saveIdleMap(session); });
+    } else {
+      session->publish_requested = true;  // the janitor saves it once the pending save is done
+    }
   }
 }
 

@@ -224,48 +224,50 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
 }
 
 void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& session) {
-  if (options_.save_map_every.count() <= 0) return;
+  // Other servers came (publishLiveMaps): the map now, whatever the clock says.
+  const bool requested = session->publish_requested.load();
+  if (options_.save_map_every.count() <= 0 && !requested) return;
   const auto now = std::chrono::steady_clock::now();
-  if (session->map_saved_at == std::chrono::steady_clock::time_point{}) {
+  if (session->map_saved_at == std::chrono::steady_clock::time_point{} && !requested) {
     session->map_saved_at = now;  // the first frame starts the clock
     return;
   }
-  if (now - session->map_saved_at < options_.save_map_every || session->map_save_pending) return;
+  if (session->map_save_pending) return;  // one save at a time (a request waits a frame)
+  if (!requested && now - session->map_saved_at < options_.save_map_every) return;
+  session->publish_requested = false;
   session->map_saved_at = now;
   session->map_save_pending = true;
   // Behind the inserts queued before it; never waiting (one save at a time is pending).
-  database_queue_->push(
-      [this, session, copy = copyMap(*session->map)] { writeSavedMap(session, copy); });
+  database_queue_->push([this, session, copy = copyMap(*session->map)] {
+    storeSavedMap(*session, copy);
+    session->map_save_pending = false;
+  });
 }
 
 void ObjectDatabaseService::saveIdleMap(const std::shared_ptr<LiveSession>& session) {
   // The stream is gone: the map is the database thread's now (flush frees it once ended).
-  if (!session->map) {
-    session->map_save_pending = false;
-    return;
-  }
-  writeSavedMap(session, copyMap(*session->map));
+  if (session->map) storeSavedMap(*session, copyMap(*session->map));
+  session->map_save_pending = false;
 }
 
-void ObjectDatabaseService::writeSavedMap(const std::shared_ptr<LiveSession>& session,
-                                          const MapCopy& copy) {
-  if (!session->ended()) {
-    const auto start = std::chrono::steady_clock::now();
-    const Status saved = writeSavedMapOf(*store_, session->name, copy, &session->saved_base);
-    if (saved.ok()) {
-      session->map_saved_frames = copy.frames;
-      logger("server")->info(
-          "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms, written in "
-          "{:.0f} ms)",
-          session->name, copy.frames, copy.map->numBlocks(), copy.copy_ms,
-          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-              .count());
-    } else {
-      logger("server")->warn("session {}: saving its map failed (a crash would lose more): {}",
-                             session->name, std::string(saved.message()));
-    }
+void ObjectDatabaseService::storeSavedMap(LiveSession& session, const MapCopy& copy) {
+  if (session.ended()) return;
+  const auto start = std::chrono::steady_clock::now();
+  const Status saved = writeSavedMapOf(*store_, session.name, copy, &session.saved_base);
+  const double ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  if (!saved.ok()) {
+    logger("server")->warn("session {}: saving its map failed (a crash would lose more, and other "
+                           "servers verify against an older one): {}",
+                           session.name, std::string(saved.message()));
+    return;
   }
-  session->map_save_pending = false;
+  session.map_saved_frames = copy.frames;
+  if (publish_maps_) published_scenes_.recordPublished(ms);
+  logger("server")->debug(
+      "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms, written in {:.0f} "
+      "ms)",
+      session.name, copy.frames, copy.map->numBlocks(), copy.copy_ms, ms);
 }
 
 void ObjectDatabaseService::queueInserts(const std::shared_ptr<LiveSession>& session,

@@ -198,6 +198,9 @@ class Store : public database::ModelStore {
                                                          std::chrono::milliseconds ttl) = 0;
   // Gives up `owner`'s lease of `session` (nothing when it does not hold it).
   virtual Status releaseLease(const std::string& session, const std::string& owner) = 0;
+  // Whether a holder other than `owner` holds a lease that has not expired: another server
+  // streams or ends a session on this database now.
+  virtual StatusOr<bool> othersHoldLeases(const std::string& owner) const = 0;
 
   // The engine's integrity check plus every blob's checks.
   virtual StatusOr<CheckReport> check() const = 0;

@@ -175,7 +175,7 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
     session.scene = scene;
   }
   std::shared_ptr<const MapCopy> publish;
-  if (session.publish_scenes) {
+  if (session.publish_scenes != nullptr && session.publish_scenes->load()) {
     const auto start = std::chrono::steady_clock::now();
     MapCopy copy{scene, std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks()),
                  session.map->frames()};

@@ -62,9 +62,9 @@ struct LiveSession {
   Params params;
   std::string client_info;
   double started_unix_s = 0.0;
-  // The store is shared by several servers: each extraction's map snapshot is published
-  // (RawSegmentJob::publish).
-  bool publish_scenes = false;
+  // Set (the service's flag) when the store is shared by several servers: while it is true,
+  // each extraction's map snapshot is published (RawSegmentJob::publish).
+  const std::atomic<bool>* publish_scenes = nullptr;
 
   // Used by one thread at a time: the stream's frame worker, then (after it) the database thread.
   std::optional<segmentation::DepthSegmenter> segmenter;
@@ -101,6 +101,8 @@ struct LiveSession {
   // the frame count of the last save written.
   std::chrono::steady_clock::time_point map_saved_at{};
   std::atomic<bool> map_save_pending{false};
+  // Save the map at the next chance, whatever the clock (another server came: publish it).
+  std::atomic<bool> publish_requested{false};
   std::atomic<int64_t> map_saved_frames{0};
   // The database thread's: the map last written as the saved map, the base of the next write
   // (only the blocks that changed since are written; none: the whole map).
@@ -156,8 +158,8 @@ Status integrateFrame(LiveSession& session, const v1::Frame& frame, const Prepar
                       v1::FrameAck* ack);
 
 // Step 4: the segments idle for the GSM's idle time (every live one with `everything`), as jobs
-// that share one snapshot of the map, which also becomes session.scene (and, with
-// session.publish_scenes, the first job's `publish`, with the map's main labels). Runs on the
+// that share one snapshot of the map, which also becomes session.scene (and, while
+// session.publish_scenes says so, the first job's `publish`, with the map's main labels). Runs on the
 // thread that owns the map.
 std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything,
                                            v1::SegmentExtracted::Reason reason);

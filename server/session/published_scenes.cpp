@@ -30,17 +30,10 @@ Status writeSavedMapOf(storage::Store& store, const std::string& name, const Map
   return written;
 }
 
-Status PublishedScenes::publish(const std::string& name, const MapCopy& copy,
-                                std::optional<MapCopy>* base) {
-  const auto start = std::chrono::steady_clock::now();
-  OBJDB_RETURN_IF_ERROR(writeSavedMapOf(*store_, name, copy, base));
-  const double ms = msSince(start);
-  logger("server")->debug("session {}: map published after {} frames ({} blocks, {:.0f} ms)",
-                          name, copy.frames, copy.map->numBlocks(), ms);
+void PublishedScenes::recordPublished(double ms) {
   std::lock_guard lock(mutex_);
   ++counters_.published;
   counters_.publish_ms += ms;
-  return absl::OkStatus();
 }
 
 std::shared_ptr<const tsdf::TsdfLayer> PublishedScenes::scene(const std::string& name) {

@@ -1,10 +1,10 @@
 // Live maps across servers. Model-to-scene verification needs the map of every session a model
 // was seen in. One server verifies poses in its own live sessions against each session's newest
 // extraction snapshot (LiveSession::scene). When several servers share one database, a session
-// live on another server has no map this server can read, unless that server publishes it: each
-// extraction's snapshot is stored as the session's saved map before the segments extracted with
-// it are inserted (publish), and the other servers read it back (scene), decoded once per
-// version. So a model's observation in a live session is never newer than the map published for
+// live on another server has no map this server can read, unless that server publishes it: while
+// another server holds a session lease, each extraction's snapshot is stored as the session's
+// saved map before the segments extracted with it are inserted (writeSavedMapOf, by the service),
+// and the other servers read it back (scene), decoded once per version. So a model's observation in a live session is never newer than the map published for
 // that session, and every server verifies against the snapshot the owner itself would use, as of
 // the owner's latest extraction.
 #pragma once
@@ -35,9 +35,9 @@ class PublishedScenes {
  public:
   explicit PublishedScenes(storage::Store* store) : store_(store) {}
 
-  // Stores `copy` (an extraction's snapshot with its labels) as session `name`'s saved map
-  // (writeSavedMapOf).
-  Status publish(const std::string& name, const MapCopy& copy, std::optional<MapCopy>* base);
+  // A map this server published (written as its session's saved map while other servers
+  // were at work on the database), in `ms`.
+  void recordPublished(double ms);
 
   // The map to verify poses in session `name` against when this server does not stream it: its
   // stored scene when it has ended, else the map its server published last (decoded on first
@@ -45,7 +45,7 @@ class PublishedScenes {
   std::shared_ptr<const tsdf::TsdfLayer> scene(const std::string& name);
 
   struct Counters {
-    uint64_t published = 0;      // maps this server published
+    uint64_t published = 0;      // maps this server published (recordPublished)
     double publish_ms = 0.0;     // time spent encoding and writing them
     uint64_t read = 0;           // other servers' maps decoded here
     double read_ms = 0.0;        // time spent reading and decoding them

@@ -119,4 +119,20 @@ Status PostgresStore::releaseLease(const std::string& session, const std::string
   });
 }
 
+StatusOr<bool> PostgresStore::othersHoldLeases(const std::string& owner) const {
+  bool others = false;
+  OBJDB_RETURN_IF_ERROR(impl_->read("reading the session leases", [&](const pg::Connection& c)
+                                                                        -> Status {
+    Params p;
+    p.text(owner);
+    OBJDB_ASSIGN_OR_RETURN(
+        Result r, c.exec("SELECT EXISTS (SELECT 1 FROM session_leases WHERE owner <> $1 AND "
+                         "expires_at > now())",
+                         p, "reading the session leases"));
+    others = r.rows() == 1 && r.boolean(0, 0);
+    return absl::OkStatus();
+  }));
+  return others;
+}
+
 }  // namespace objdb::storage

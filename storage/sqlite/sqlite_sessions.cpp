@@ -121,4 +121,13 @@ Status SqliteStore::releaseLease(const std::string& session, const std::string& 
   return absl::OkStatus();
 }
 
+StatusOr<bool> SqliteStore::othersHoldLeases(const std::string& owner) const {
+  const auto now = std::chrono::steady_clock::now();
+  std::lock_guard lock(lease_mutex_);
+  for (const auto& [session, lease] : leases_) {
+    if (lease.owner != owner && lease.expires > now) return true;
+  }
+  return false;
+}
+
 }  // namespace objdb::storage

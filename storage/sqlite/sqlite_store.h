@@ -110,7 +110,7 @@ class SqliteStore : public Store {
     std::string owner;
     std::chrono::steady_clock::time_point expires;
   };
-  std::mutex lease_mutex_;
+  mutable std::mutex lease_mutex_;
   std::map<std::string, Lease> leases_;  // by session name
 };
 

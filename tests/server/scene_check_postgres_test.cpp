@@ -1,9 +1,11 @@
 // Model-to-scene verification across servers (server/session/published_scenes.h): two servers
 // on one PostgreSQL database. Session "left", on server 1, sees box A, looks away (A is extracted
-// and inserted while the session streams) and stays open. Session "right", on server 2, sees an
-// identical box B and ends. Server 2's insert of B finds A's model, seen in "left", which is live
-// on server 1: it verifies A's pose against the map server 1 published with A's extraction, and
-// merges. Without that map the candidate would be rejected at the scene check ("no scene map").
+// and inserted while the session streams) and stays open; server 2 holds no session then, so
+// server 1 publishes nothing. Session "right" then starts on server 2: server 1's lease keeper
+// sees another server at work and publishes left's map at once. Right sees an identical box B
+// and ends; server 2's insert of B finds A's model, seen in "left", which is live on server 1: it
+// verifies A's pose against the map server 1 published, and merges. Without that map the
+// candidate would be rejected at the scene check ("no scene map").
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
@@ -89,6 +91,7 @@ TEST(SceneCheckPostgres, AServerVerifiesAPoseInASessionLiveOnAnotherAgainstItsPu
     ServerOptions options = testing::loopbackOptions(*uri);
     options.server_id = absl::StrFormat("server-%d", s + 1);
     options.save_map_every = std::chrono::milliseconds(0);  // only the published maps are saved
+    options.lease_ttl = std::chrono::milliseconds(300);     // the keeper looks every 100 ms
     options.params.tsdf.carve_distance_m = 0.3f;
     servers[s] = testing::startOrDie(options);
     ASSERT_NE(servers[s], nullptr);
@@ -109,13 +112,18 @@ TEST(SceneCheckPostgres, AServerVerifiesAPoseInASessionLiveOnAnotherAgainstItsPu
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   ASSERT_GT(one.insert_timings().inserts(), 0u);
-  EXPECT_GE(one.maps_published(), 1u);
+  EXPECT_EQ(one.maps_published(), 0u) << "published while no other server was at work";
 
   // "right" on server 2: box B, ended.
   const Recording right = render(false, absl::StrFormat("%s,%s,%s", kAtB, kAtB, kAtB), 40);
   const testing::IngestResult streamed_right =
       testing::ingest(*stubs[1], requestsOf("right", right));
   ASSERT_TRUE(streamed_right.everyFrameAccepted(right.depth.size()));
+  for (int waited = 0; waited < 600 && one.maps_published() == 0; ++waited) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    one = statsOf(*stubs[0]);
+  }
+  ASSERT_GE(one.maps_published(), 1u) << "server 1 did not publish left's map for server 2";
   v1::EndSessionResponse ended;
   ASSERT_TRUE(testing::endSession(*stubs[1], "right", &ended).ok());
   const v1::GetStatsResponse two = statsOf(*stubs[1]);

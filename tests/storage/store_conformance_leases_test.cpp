@@ -57,5 +57,21 @@ TEST_P(StoreConformance, AnExpiredLeaseIsNotRenewedAndGoesToTheNextServerThatAsk
   EXPECT_EQ(store->acquireLease("tuesday", "b", 30s).value(), "a");  // renewed, still a's
 }
 
+// Whether another server is at work on the database: someone else holds a live lease.
+TEST_P(StoreConformance, OthersHoldLeasesWhileAnotherHolderHasOneThatHasNotExpired) {
+  auto store = open(freshTarget());
+  ASSERT_NE(store, nullptr);
+  EXPECT_FALSE(store->othersHoldLeases("a").value());
+  EXPECT_EQ(store->acquireLease("monday", "a", 30s).value(), "a");
+  EXPECT_FALSE(store->othersHoldLeases("a").value()) << "its own leases are not others'";
+  EXPECT_TRUE(store->othersHoldLeases("b").value());
+  EXPECT_EQ(store->acquireLease("tuesday", "b", 300ms).value(), "b");
+  EXPECT_TRUE(store->othersHoldLeases("a").value());
+  std::this_thread::sleep_for(600ms);
+  EXPECT_FALSE(store->othersHoldLeases("a").value()) << "b's lease expired";
+  ASSERT_TRUE(store->releaseLease("monday", "a").ok());
+  EXPECT_FALSE(store->othersHoldLeases("b").value());
+}
+
 }  // namespace
 }  // namespace objdb::storage
