@@ -108,7 +108,7 @@ std::vector<uint32_t> detectKeypoints(const PointCloud& cloud, const KeypointPar
   if (cloud.points.size() < 3 || cloud.normals.size() != cloud.points.size()) return result;
   const auto points = toPcl(cloud);
   const auto normals = toPclNormals(cloud);
-  auto tree = std::make_shared<pcl::search::KdTree<pcl::PointXYZ>>(/*sorted=*/false);
+  auto tree = std::make_shared<pcl::search::KdTree<pcl::PointXYZ>>();
   tree->setInputCloud(points);
 
   // ISS: many keypoints, also in smooth areas (paper §III-C.2).
@@ -209,7 +209,7 @@ std::vector<Fpfh> computeFpfh(const PointCloud& cloud, std::vector<uint32_t>* in
   fpfh.setSearchSurface(points);
   fpfh.setInputNormals(normals);
   fpfh.setInputCloud(keypoints);
-  fpfh.setSearchMethod(std::make_shared<pcl::search::KdTree<pcl::PointXYZ>>(/*sorted=*/false));
+  fpfh.setSearchMethod(std::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
   fpfh.setRadiusSearch(params.fpfh_radius_m);
   pcl::PointCloud<pcl::FPFHSignature33> descriptors;
   fpfh.compute(descriptors);
