@@ -190,11 +190,22 @@ void ObjectDatabaseService::releaseLease(const std::string& name) {
 void ObjectDatabaseService::keepLeases() {
   const auto period = std::max<std::chrono::milliseconds>(std::chrono::milliseconds(20),
                                                           options_.lease_ttl / 3);
+  // Whether other servers are at work is asked more often than leases are renewed (at least
+  // every second), so that live maps are published soon after another server starts a session.
+  const auto look = std::min<std::chrono::milliseconds>(period, std::chrono::seconds(1));
   auto renewed_at = std::chrono::steady_clock::now();
+  auto kept_at = renewed_at;
   std::unique_lock lock(mutex_);
   while (!keeper_stop_) {
-    keeper_wake_.wait_for(lock, period);
+    keeper_wake_.wait_for(lock, look);
     if (keeper_stop_) break;
+    if (std::chrono::steady_clock::now() - kept_at < period) {
+      lock.unlock();
+      if (store_->sharedByServers()) updatePublication();
+      lock.lock();
+      continue;
+    }
+    kept_at = std::chrono::steady_clock::now();
     // Once stopping, leases are still renewed (stop() ends the sessions), but none taken over.
     const bool takeovers = recovery_started_ && !stopped_;
     const std::set<std::string> leased = leased_;
