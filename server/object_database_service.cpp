@@ -98,24 +98,20 @@ void ObjectDatabaseService::endIdleSessions() {
     for (auto& [name, session] : sessions_) {
       std::lock_guard session_lock(session->mutex);
       // A session whose stream is gone keeps its map in memory until it ends: what came after
-      // its last save is saved too, a few seconds after the stream went.
+      // its last save is saved too, a few seconds after the stream went; and at once when other
+      // servers came (updatePublication).
       if (!session->streaming && !session->end_queued &&
-          session->state != v1::SESSION_STATE_ENDED && options_.save_map_every.count() > 0 &&
-          !session->map_save_pending &&
-          session->map_saved_frames < int64_t(session->counters.frames_integrated()) &&
-          session->idle_save_tried < int64_t(session->counters.frames_integrated()) &&
-          now - session->stream_gone >=
-              std::min<std::chrono::milliseconds>(options_.save_map_every, kIdleSaveDelay)) {
-        session->map_save_pending = true;
-        session->idle_save_tried = int64_t(session->counters.frames_integrated());  // once
-        database_queue_->push([this, session = session] { saveIdleMap(session); });
-      }
-      // Other servers came (publishLiveMaps): the map of a session whose stream is gone, now.
-      if (!session->streaming && !session->end_queued &&
-          session->state != v1::SESSION_STATE_ENDED && !session->map_save_pending &&
-          session->publish_requested.exchange(false)) {
-        session->map_save_pending = true;
-        database_queue_->push([this, session = session] { saveIdleMap(session); });
+          session->state != v1::SESSION_STATE_ENDED && !session->map_save_pending) {
+        const int64_t frames = int64_t(session->counters.frames_integrated());
+        const bool due = options_.save_map_every.count() > 0 &&
+                         session->map_saved_frames < frames && session->idle_save_tried < frames &&
+                         now - session->stream_gone >= std::min<std::chrono::milliseconds>(
+                                                           options_.save_map_every, kIdleSaveDelay);
+        if (session->publish_requested.exchange(false) || due) {
+          session->map_save_pending = true;
+          session->idle_save_tried = frames;  // once
+          database_queue_->push([this, session = session] { saveIdleMap(session); });
+        }
       }
       if (session->streaming || session->end_queued ||
           session->state == v1::SESSION_STATE_ENDED ||

@@ -199,17 +199,16 @@ void ObjectDatabaseService::keepLeases() {
   while (!keeper_stop_) {
     keeper_wake_.wait_for(lock, look);
     if (keeper_stop_) break;
-    if (std::chrono::steady_clock::now() - kept_at < period) {
-      lock.unlock();
-      if (store_->sharedByServers()) updatePublication();
-      lock.lock();
-      continue;
-    }
-    kept_at = std::chrono::steady_clock::now();
     // Once stopping, leases are still renewed (stop() ends the sessions), but none taken over.
     const bool takeovers = recovery_started_ && !stopped_;
     const std::set<std::string> leased = leased_;
     lock.unlock();
+    if (store_->sharedByServers()) updatePublication();
+    if (std::chrono::steady_clock::now() - kept_at < period) {
+      lock.lock();
+      continue;
+    }
+    kept_at = std::chrono::steady_clock::now();
     // Renewal first: a lease that lapsed (the database was unreachable for a whole time to live)
     // may be another server's by now.
     std::vector<std::string> lost;
@@ -227,7 +226,6 @@ void ObjectDatabaseService::keepLeases() {
       if (now - renewed_at >= options_.lease_ttl) lost.assign(leased.begin(), leased.end());
     }
     if (!lost.empty()) leasesLost(lost);
-    if (store_->sharedByServers()) updatePublication();
     // Open sessions no server renews the lease of: their server stopped.
     std::vector<storage::SessionInfo> orphans;
     if (takeovers && held.ok()) {

@@ -224,7 +224,7 @@ void ObjectDatabaseService::processFrame(const std::shared_ptr<IngestStream>& st
 }
 
 void ObjectDatabaseService::maybeSaveMap(const std::shared_ptr<LiveSession>& session) {
-  // Other servers came (publishLiveMaps): the map now, whatever the clock says.
+  // Other servers came (updatePublication): the map now, whatever the clock says.
   const bool requested = session->publish_requested.load();
   if (options_.save_map_every.count() <= 0 && !requested) return;
   const auto now = std::chrono::steady_clock::now();

@@ -211,17 +211,25 @@ StatusOr<EncodedMap> encodeMap(const std::string& what, const tsdf::TsdfLayer& m
     e.tsdf.push_back({index, encodeTsdfBlock(*block, options)});
   }
   if (labels != nullptr) {
-    const size_t voxels = size_t(e.voxels_per_side * e.voxels_per_side * e.voxels_per_side);
     for (const auto& [index, block] : *labels) {
-      if (block.size() != voxels) {
-        return absl::InvalidArgumentError(absl::StrFormat(
-            "%s: label block (%d, %d, %d) has %d labels, the grid's blocks %d", what, index.x(),
-            index.y(), index.z(), block.size(), voxels));
-      }
-      e.labels.push_back({index, encodeLabelBlock(block, options)});
+      OBJDB_ASSIGN_OR_RETURN(EncodedBlock encoded,
+                             encodeMapLabels(what, index, block, e.voxels_per_side, options));
+      e.labels.push_back(std::move(encoded));
     }
   }
   return e;
+}
+
+StatusOr<EncodedBlock> encodeMapLabels(const std::string& what, const tsdf::BlockIndex& index,
+                                       const std::vector<uint32_t>& labels,
+                                       int64_t voxels_per_side, const BlobOptions& options) {
+  const size_t voxels = size_t(voxels_per_side * voxels_per_side * voxels_per_side);
+  if (labels.size() != voxels) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: label block (%d, %d, %d) has %d labels, the grid's blocks %d", what,
+                        index.x(), index.y(), index.z(), labels.size(), voxels));
+  }
+  return EncodedBlock{index, encodeLabelBlock(labels, options)};
 }
 
 StatusOr<std::vector<uint32_t>> decodeMapLabels(std::string_view blob, int64_t voxels_per_side,

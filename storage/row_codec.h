@@ -169,6 +169,11 @@ struct EncodedMap {
 // INVALID_ARGUMENT when a label block's size is not the grid's block size.
 StatusOr<EncodedMap> encodeMap(const std::string& what, const tsdf::TsdfLayer& map,
                                const gsm::LabelBlocks* labels, const BlobOptions& options);
+// One label block of a map, encoded; INVALID_ARGUMENT (naming `what` and the block) when its
+// size is not the grid's block size.
+StatusOr<EncodedBlock> encodeMapLabels(const std::string& what, const tsdf::BlockIndex& index,
+                                       const std::vector<uint32_t>& labels,
+                                       int64_t voxels_per_side, const BlobOptions& options);
 // A label block as read (`where` names it in messages); DATA_LOSS when damaged or of another size.
 StatusOr<std::vector<uint32_t>> decodeMapLabels(std::string_view blob, int64_t voxels_per_side,
                                                 const std::string& where);

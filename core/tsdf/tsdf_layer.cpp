@@ -128,41 +128,28 @@ bool TsdfLayer::interpolate(const Eigen::Vector3f& p, float* distance, float* we
   const Eigen::Vector3f f = q - lower;
   const VoxelIndex base = lower.cast<int>();
   float d = 0.0f, w = 0.0f;
-  // The common case: all 8 corners in one block, found once (the same sums, in the same order).
+  // The common case: all 8 corners in one block, looked up once (else each corner's own).
   const BlockIndex b = blockOfVoxel(base);
   const Eigen::Vector3i local = base - b * vps_;
-  if (local.x() < vps_ - 1 && local.y() < vps_ - 1 && local.z() < vps_ - 1) {
-    const TsdfBlock* in = block(b);
-    if (in == nullptr) return false;  // some corner contributes, and none is there
-    const size_t first =
-        size_t(local.x()) + size_t(vps_) * (size_t(local.y()) + size_t(vps_) * size_t(local.z()));
-    for (int corner = 0; corner < 8; ++corner) {
-      const int ox = corner & 1, oy = (corner >> 1) & 1, oz = (corner >> 2) & 1;
-      const float wx = ox ? f.x() : 1.0f - f.x();
-      const float wy = oy ? f.y() : 1.0f - f.y();
-      const float wz = oz ? f.z() : 1.0f - f.z();
-      const float c = wx * wy * wz;
-      if (c == 0.0f) continue;
-      const TsdfVoxel& v =
-          in->voxel(first + size_t(ox) + size_t(vps_) * (size_t(oy) + size_t(vps_) * size_t(oz)));
-      if (!(v.weight > 0.0f)) return false;
-      d += c * v.distance;
-      w += c * v.weight;
-    }
-    *distance = d;
-    *weight = w;
-    return true;
-  }
+  const bool one_block = local.x() < vps_ - 1 && local.y() < vps_ - 1 && local.z() < vps_ - 1;
+  const TsdfBlock* in = one_block ? block(b) : nullptr;
+  const size_t first =
+      size_t(local.x()) + size_t(vps_) * (size_t(local.y()) + size_t(vps_) * size_t(local.z()));
   for (int corner = 0; corner < 8; ++corner) {
-    const Eigen::Vector3i offset(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-    const float wx = offset.x() ? f.x() : 1.0f - f.x();
-    const float wy = offset.y() ? f.y() : 1.0f - f.y();
-    const float wz = offset.z() ? f.z() : 1.0f - f.z();
+    const int ox = corner & 1, oy = (corner >> 1) & 1, oz = (corner >> 2) & 1;
+    const float wx = ox ? f.x() : 1.0f - f.x();
+    const float wy = oy ? f.y() : 1.0f - f.y();
+    const float wz = oz ? f.z() : 1.0f - f.z();
     const float c = wx * wy * wz;
     // A corner that does not contribute need not be observed: at a voxel centre the value is
     // that voxel's, whatever its neighbours.
     if (c == 0.0f) continue;
-    const TsdfVoxel* v = voxel(base + offset);
+    const TsdfVoxel* v = nullptr;
+    if (!one_block) {
+      v = voxel(base + Eigen::Vector3i(ox, oy, oz));
+    } else if (in != nullptr) {
+      v = &in->voxel(first + size_t(ox) + size_t(vps_) * (size_t(oy) + size_t(vps_) * size_t(oz)));
+    }
     if (v == nullptr || !(v->weight > 0.0f)) return false;
     d += c * v->distance;
     w += c * v->weight;

@@ -176,12 +176,7 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
   }
   std::shared_ptr<const MapCopy> publish;
   if (session.publish_scenes != nullptr && session.publish_scenes->load()) {
-    const auto start = std::chrono::steady_clock::now();
-    MapCopy copy{scene, std::make_shared<const gsm::LabelBlocks>(session.map->mainLabelBlocks()),
-                 session.map->frames()};
-    copy.copy_ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    publish = std::make_shared<const MapCopy>(std::move(copy));
+    publish = std::make_shared<const MapCopy>(copyMap(*session.map, scene));
   }
   for (auto& segment : segments) {
     const size_t frame = size_t(std::max<int64_t>(segment.last_update_frame, 0));
@@ -193,9 +188,10 @@ std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything
   return jobs;
 }
 
-MapCopy copyMap(const gsm::Gsm& map) {
+MapCopy copyMap(const gsm::Gsm& map, std::shared_ptr<const tsdf::TsdfLayer> snapshot) {
   const auto start = std::chrono::steady_clock::now();
-  MapCopy copy{std::make_shared<const tsdf::TsdfLayer>(map.tsdf().snapshot()),
+  if (snapshot == nullptr) snapshot = std::make_shared<const tsdf::TsdfLayer>(map.tsdf().snapshot());
+  MapCopy copy{std::move(snapshot),
                std::make_shared<const gsm::LabelBlocks>(map.mainLabelBlocks()), map.frames()};
   copy.copy_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();

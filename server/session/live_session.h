@@ -159,12 +159,13 @@ Status integrateFrame(LiveSession& session, const v1::Frame& frame, const Prepar
 
 // Step 4: the segments idle for the GSM's idle time (every live one with `everything`), as jobs
 // that share one snapshot of the map, which also becomes session.scene (and, while
-// session.publish_scenes says so, the first job's `publish`, with the map's main labels). Runs on the
-// thread that owns the map.
+// session.publish_scenes says so, the first job's `publish`, with the map's main labels). Runs
+// on the thread that owns the map.
 std::vector<RawSegmentJob> extractSegments(LiveSession& session, bool everything,
                                            v1::SegmentExtracted::Reason reason);
 
-MapCopy copyMap(const gsm::Gsm& map);
+// `snapshot`: a snapshot of the map's TSDF taken already (null: one is taken).
+MapCopy copyMap(const gsm::Gsm& map, std::shared_ptr<const tsdf::TsdfLayer> snapshot = nullptr);
 
 // Whether a stored raw segment is `segment`: the same pose (hence the same grid origin), the same
 // voxels (both lists in extractRawSegment's order) and the same TSDF values around them. Then

@@ -54,8 +54,10 @@ std::shared_ptr<const tsdf::TsdfLayer> PublishedScenes::scene(const std::string&
   }
   std::lock_guard lock(mutex_);
   if (*frames < 0) {
-    cache_.erase(name);  // nothing published (or the session ended meanwhile: read its scene)
-    return store_->scene(name).value_or(nullptr);
+    // Nothing published, or the session ended meanwhile: the database reads its stored scene
+    // when this answers null.
+    cache_.erase(name);
+    return nullptr;
   }
   if (auto it = cache_.find(name); it != cache_.end() && it->second.first == *frames) {
     return it->second.second;
@@ -63,8 +65,9 @@ std::shared_ptr<const tsdf::TsdfLayer> PublishedScenes::scene(const std::string&
   const auto start = std::chrono::steady_clock::now();
   auto saved = store_->savedMap(name);
   if (!saved.ok() || saved->map == nullptr) {
-    // Ended (and its saved map deleted) between the two reads: its scene is stored now.
-    return store_->scene(name).value_or(nullptr);
+    // Ended (and its saved map deleted) between the two reads: its scene is stored now, and the
+    // database reads it when this answers null.
+    return nullptr;
   }
   if (cache_.size() >= kMaxCached) cache_.clear();
   cache_[name] = {saved->frames, saved->map};

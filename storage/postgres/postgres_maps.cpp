@@ -234,16 +234,13 @@ Status PostgresStore::updateSavedMap(const std::string& session, int64_t frames,
   for (const auto& [index, block] : base_map.blocks()) {
     if (!map.blocks().contains(index)) tsdf_gone.push_back(index);
   }
-  const size_t voxels = size_t(map.voxelsPerSide()) * map.voxelsPerSide() * map.voxelsPerSide();
   for (const auto& [index, block] : labels) {
     const auto it = base_labels.find(index);
     if (it != base_labels.end() && it->second == block) continue;
-    if (block.size() != voxels) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "%s: label block (%d, %d, %d) has %d labels, the grid's blocks %d", context, index.x(),
-          index.y(), index.z(), block.size(), voxels));
-    }
-    changed.labels.push_back({index, encodeLabelBlock(block, options_.blobs)});
+    OBJDB_ASSIGN_OR_RETURN(EncodedBlock encoded,
+                           encodeMapLabels(context, index, block, map.voxelsPerSide(),
+                                           options_.blobs));
+    changed.labels.push_back(std::move(encoded));
   }
   for (const auto& [index, block] : base_labels) {
     if (!labels.contains(index)) labels_gone.push_back(index);
