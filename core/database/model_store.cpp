@@ -41,6 +41,17 @@ StatusOr<std::shared_ptr<const RawSegmentRecord>> InMemoryModelStore::rawSegment
   return it->second;
 }
 
+StatusOr<std::vector<float>> ModelStore::observationDepths(
+    const std::vector<SegmentKey>& keys) const {
+  std::vector<float> depths;
+  depths.reserve(keys.size());
+  for (const auto& key : keys) {
+    OBJDB_ASSIGN_OR_RETURN(const auto segment, rawSegment(key));
+    depths.push_back(segment->observation_depth_m);
+  }
+  return depths;
+}
+
 StatusOr<int64_t> InMemoryModelStore::addModel(model::ObjectModel model) {
   std::lock_guard lock(mutex_);
   model.id = next_id_++;

@@ -110,6 +110,11 @@ class ModelStore {
   virtual Status putRawSegment(const RawSegmentRecord& segment) = 0;
   virtual StatusOr<std::shared_ptr<const RawSegmentRecord>> rawSegment(
       const SegmentKey& key) const = 0;
+  // The depth each of these raw segments was seen from (RawSegmentRecord::observation_depth_m;
+  // 0: unknown), in their order. A merge into a model of many segments needs all their depths but
+  // the grid of the new segment only; a backend answers this without decoding grids. NOT_FOUND:
+  // a key without a raw segment. This default reads the whole records.
+  virtual StatusOr<std::vector<float>> observationDepths(const std::vector<SegmentKey>& keys) const;
 
   // Adds a model; the store assigns and returns its id (stable, never reused).
   virtual StatusOr<int64_t> addModel(model::ObjectModel model) = 0;

@@ -8,9 +8,7 @@
 #include <set>
 #include <thread>
 
-#include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_format.h"
-#include "core/common/grid_key.h"
 #include "core/common/logging.h"
 #include "core/model/structure.h"
 
@@ -78,44 +76,6 @@ model::ModelBuildParams ObjectDatabase::buildParams(float observation_depth_m) c
   p.mesh_min_weight = params_.tsdf.mesh_min_weight;
   p.threads = params_.database.threads;
   return p;
-}
-
-StatusOr<model::ObjectModel> ObjectDatabase::buildFromObservations(
-    std::vector<model::Observation> observations, int64_t id) {
-  if (observations.empty()) return absl::InternalError("a model needs an observation");
-  std::optional<tsdf::TsdfLayer> grid;
-  std::vector<tsdf::VoxelIndex> voxels;
-  absl::flat_hash_set<uint64_t> seen;
-  // The surface is judged with the noise of the depths its segments were seen from (mean of the
-  // known ones).
-  double depth_sum = 0.0;
-  int depths = 0;
-  for (const auto& o : observations) {
-    OBJDB_ASSIGN_OR_RETURN(auto segment, store_->rawSegment(keyOf(o)));
-    if (segment->observation_depth_m > 0.0f) {
-      depth_sum += segment->observation_depth_m;
-      ++depths;
-    }
-    if (!grid) {
-      OBJDB_ASSIGN_OR_RETURN(tsdf::TsdfLayer empty,
-                             tsdf::TsdfLayer::create(segment->grid->voxelSize(),
-                                                     segment->grid->voxelsPerSide()));
-      grid.emplace(std::move(empty));
-    }
-    matching::mergeGrids(&*grid, *segment->grid, o.T_object_segment, params_.tsdf.max_weight);
-    const Eigen::Isometry3f T = o.T_object_segment.cast<float>();
-    for (const auto& v : segment->voxels) {
-      const tsdf::VoxelIndex mapped = grid->voxelIndexOf(T * segment->grid->voxelCenter(v));
-      if (seen.insert(packGridKey(mapped)).second) voxels.push_back(mapped);
-    }
-  }
-  OBJDB_ASSIGN_OR_RETURN(model::ObjectModel model,
-                         model::buildModel(std::move(*grid), voxels,
-                                           buildParams(depths > 0 ? float(depth_sum / depths)
-                                                                  : 0.0f)));
-  model.id = id;
-  model.observations = std::move(observations);
-  return model;
 }
 
 StatusOr<std::shared_ptr<const tsdf::TsdfLayer>> ObjectDatabase::sceneOf(
@@ -469,11 +429,14 @@ Status ObjectDatabase::absorbCoAccepted(
       report->co_accepted.push_back(std::move(check));
       continue;
     }
+    size_t fused = 0;
     OBJDB_ASSIGN_OR_RETURN(
         model::ObjectModel joined,
-        buildFromObservations(
-            joinedObservations(*merged, other.observations, check.registration.T_target_source),
-            merged->id));
+        extendModel(*merged,
+                    joinedObservations(*merged, other.observations,
+                                       check.registration.T_target_source),
+                    nullptr, &fused));
+    report->merge_fused_segments += fused;
     std::vector<SegmentKey> keys;
     for (const auto& o : joined.observations) keys.push_back(keyOf(o));
     MatchEntry entry = matchEntryOf(joined);
@@ -681,9 +644,10 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
     const model::ObjectModel& target = *loaded[slot];
     OBJDB_ASSIGN_OR_RETURN(
         model::ObjectModel merged,
-        buildFromObservations(joinedObservations(target, incoming.observations,
-                                                 best->registration.T_target_source),
-                              target.id));
+        extendModel(target,
+                    joinedObservations(target, incoming.observations,
+                                       best->registration.T_target_source),
+                    &record, &report.merge_fused_segments));
     const MergeRecord merge =
         mergeRecordOf(target.id, absl::StrFormat("segment %s/%d", session, segment.label), *best);
     std::vector<SegmentKey> keys;

@@ -113,6 +113,10 @@ struct InsertReport {
   // Replacing that earlier contribution emptied this model, and the store removed it (0: none).
   // The segment is now held by model_id (0 when unusable).
   int64_t removed_model = 0;
+  // Merged: the segment grids fused to build the merged model (1: the segment's own, fused into
+  // the stored model's grid; the model's every segment when it was rebuilt from them), plus those
+  // of each co-accepted model joined to it (its segments, fused in after the merged model's).
+  size_t merge_fused_segments = 0;
   size_t candidates = 0;         // after the prefilter, readable
   size_t unreadable_candidates = 0;  // prefilter candidates whose stored data failed to load
   std::vector<CandidateResult> results;  // one per candidate, in candidate order
@@ -173,8 +177,16 @@ class ObjectDatabase {
  private:
   ObjectDatabase(const Params& params, ModelStore* store);
   model::ModelBuildParams buildParams(float observation_depth_m) const;
+  // A model from the raw segments of `observations`, fused in their order (its id: `id`).
   StatusOr<model::ObjectModel> buildFromObservations(std::vector<model::Observation> observations,
                                                      int64_t id);
+  // `target` extended by more segments: `observations` are target's, then the added ones. Their
+  // segments are fused into the stored grid, not every segment again; the same model as
+  // buildFromObservations(observations) (object_database_build.cpp). The added segments are
+  // read from the store, but `in_hand` (the one being inserted). `fused`: segment grids fused.
+  StatusOr<model::ObjectModel> extendModel(const model::ObjectModel& target,
+                                           std::vector<model::Observation> observations,
+                                           const RawSegmentRecord* in_hand, size_t* fused);
   // Takes the segment `key` out of model `model_id`; true when that emptied the model, which the
   // store then removed.
   StatusOr<bool> removeContribution(const SegmentKey& key, int64_t model_id);

@@ -147,6 +147,32 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> PostgresStore::rawSe
   return out;
 }
 
+StatusOr<std::vector<float>> PostgresStore::observationDepths(
+    const std::vector<database::SegmentKey>& keys) const {
+  std::vector<float> depths;
+  OBJDB_RETURN_IF_ERROR(
+      impl_->read("reading raw segments' depths", [&](const pg::Connection& c) -> Status {
+        depths.clear();
+        depths.reserve(keys.size());
+        for (const auto& key : keys) {
+          Params p;
+          p.text(key.session).add(int64_t(key.label));
+          OBJDB_ASSIGN_OR_RETURN(
+              Result r,
+              c.exec("SELECT r.observation_depth_m FROM raw_segments r JOIN sessions s ON "
+                     "s.id = r.session_id WHERE s.name = $1 AND r.label = $2",
+                     p, "reading raw segments' depths"));
+          if (r.rows() == 0) {
+            return absl::NotFoundError(
+                absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+          }
+          depths.push_back(float(r.real(0, 0)));
+        }
+        return absl::OkStatus();
+      }));
+  return depths;
+}
+
 StatusOr<int64_t> PostgresStore::rawSegmentId(const database::SegmentKey& key) const {
   int64_t id = 0;
   const std::string context = absl::StrFormat("reading raw segment %s/%d", key.session, key.label);

@@ -184,6 +184,28 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> SqliteStore::rawSegm
   return decodeRawSegment(key, readRawSegmentColumns(internal::StatementRow(s)));
 }
 
+StatusOr<std::vector<float>> SqliteStore::observationDepths(
+    const std::vector<database::SegmentKey>& keys) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Statement s,
+                         Statement::prepare(*lease,
+                                            "SELECT r.observation_depth_m FROM raw_segments r "
+                                            "JOIN sessions s ON s.id = r.session_id WHERE "
+                                            "s.name = ? AND r.label = ?"));
+  std::vector<float> depths;
+  depths.reserve(keys.size());
+  for (const auto& key : keys) {
+    OBJDB_RETURN_IF_ERROR(s.reset());
+    s.bind(1, key.session).bind(2, int64_t(key.label));
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) {
+      return absl::NotFoundError(absl::StrFormat("no raw segment %s/%d", key.session, key.label));
+    }
+    depths.push_back(float(s.columnDouble(0)));
+  }
+  return depths;
+}
+
 StatusOr<int64_t> SqliteStore::rawSegmentId(const database::SegmentKey& key) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Statement s,

@@ -5,6 +5,7 @@
 #include "core/database/object_database.h"
 #include "storage/sqlite/sqlite_store.h"
 #include "tests/support/faulty_vfs.h"
+#include "tests/support/model_compare.h"
 #include "tests/support/object_scenes.h"
 #include "tests/support/temp_dir.h"
 
@@ -67,6 +68,31 @@ TEST(ObjectDatabaseOnSqlite, MatchesInMemoryAndCarriesOnAfterReopen) {
   EXPECT_TRUE(again->merged);
   EXPECT_EQ(store->modelIds().value().size(), 1u);
   EXPECT_EQ(store->model(1).value()->observations.size(), 2u);
+}
+
+// A merge into a model of several segments fuses the new one into the model's grid as the file
+// stored it: after the round trip through the file, the merged model is still the one all its
+// segments, read back and fused again in order, make (tests/support/model_compare.h).
+TEST(ObjectDatabaseOnSqlite, AMergedModelIsTheModelOfAllItsStoredSegments) {
+  const World wednesday{boxWithBall(), objdb::testing::poseXyYaw(0.1, 0.6, -1.0)};
+  objdb::testing::TempDir dir;
+  auto store = SqliteStore::open((dir / "db.sqlite").string()).value();
+  insertBoth(store.get());
+  ASSERT_TRUE(
+      store->putScene("wednesday", std::make_shared<tsdf::TsdfLayer>(sceneGrid({wednesday}))).ok());
+  // A database over the file: the model of two segments comes from the store, not from memory.
+  auto db = database::ObjectDatabase::create(params(), store.get()).value();
+  auto segment = objdb::testing::rawSegment(2, wednesday, View{-0.2f, 0.2f});
+  segment.observation_depth_m = 1.7f;
+  const auto third = db->insertSegment("wednesday", segment);
+  ASSERT_TRUE(third.ok()) << third.status();
+  ASSERT_TRUE(third->merged);
+  EXPECT_EQ(third->merge_fused_segments, 1u);
+  const auto stored = store->model(third->model_id).value();
+  ASSERT_EQ(stored->observations.size(), 3u);
+  const auto reference = objdb::testing::rebuiltFromSegments(*store, *stored, params());
+  ASSERT_TRUE(reference.ok()) << reference.status();
+  EXPECT_EQ(objdb::testing::diffModels(*stored, *reference, false), "");
 }
 
 // A lone segment extracted again after it changed: its first model is emptied and removed, and the

@@ -330,6 +330,25 @@ TEST_P(StoreConformance, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   EXPECT_EQ(store->rawSegmentId({"monday", 5}).status().code(), absl::StatusCode::kNotFound);
 }
 
+TEST_P(StoreConformance, ObservationDepthsComeInTheOrderOfTheKeys) {
+  auto store = open(freshTarget());
+  ASSERT_NE(store, nullptr);
+  const std::pair<database::SegmentKey, float> segments[] = {
+      {{"monday", 4}, 2.75f}, {{"tuesday", 9}, 0.0f}, {{"monday", 5}, 1.5f}};
+  for (uint32_t i = 0; i < 3; ++i) {
+    auto segment = makeRawSegment(segments[i].first.session, segments[i].first.label, i + 1);
+    segment.observation_depth_m = segments[i].second;
+    ASSERT_TRUE(store->putRawSegment(segment).ok());
+  }
+  const auto depths = store->observationDepths({{"monday", 5}, {"tuesday", 9}, {"monday", 4}});
+  ASSERT_TRUE(depths.ok()) << depths.status();
+  EXPECT_EQ(*depths, (std::vector<float>{1.5f, 0.0f, 2.75f}));
+  EXPECT_TRUE(store->observationDepths({}).value().empty());
+  const auto missing = store->observationDepths({{"monday", 4}, {"friday", 4}});
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(missing.status().message(), HasSubstr("friday/4"));
+}
+
 // Six models: observed in up to three sessions, one room structure, one merged into another, one
 // removed; the listing's filters and pages, and every field of a summary.
 TEST_P(StoreConformance, ModelSummariesFilterBySessionMergedAndStructureAndPage) {

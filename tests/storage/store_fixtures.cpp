@@ -32,7 +32,6 @@ tsdf::TsdfLayer randomGrid(std::mt19937* rng) {
   return grid;
 }
 
-bool sameBits(const void* a, const void* b, size_t n) { return std::memcmp(a, b, n) == 0; }
 
 }  // namespace
 
@@ -80,56 +79,6 @@ database::RawSegmentRecord makeRawSegment(const std::string& session, uint32_t l
   for (int k = 0; k < 50; ++k) r.voxels.emplace_back(int(rng() % 16), int(rng() % 16), -k);
   r.extraction_frame = int64_t(seed) * 7;
   return r;
-}
-
-std::string diffLayers(const tsdf::TsdfLayer& a, const tsdf::TsdfLayer& b) {
-  if (a.voxelSize() != b.voxelSize() || a.voxelsPerSide() != b.voxelsPerSide()) {
-    return "grid geometry differs";
-  }
-  if (a.numBlocks() != b.numBlocks()) {
-    return absl::StrFormat("%d vs %d blocks", a.numBlocks(), b.numBlocks());
-  }
-  for (const auto& [index, block] : a.blocks()) {
-    const tsdf::TsdfBlock* other = b.block(index);
-    if (other == nullptr) return "a block is missing";
-    for (size_t i = 0; i < block->voxels().size(); ++i) {
-      const auto& x = block->voxels()[i];
-      const auto& y = other->voxels()[i];
-      if (!sameBits(&x.distance, &y.distance, 4) || !sameBits(&x.weight, &y.weight, 4) ||
-          !(x.color == y.color)) {
-        return absl::StrFormat("voxel %d of block (%d, %d, %d) differs", i, index.x(), index.y(),
-                               index.z());
-      }
-    }
-  }
-  return "";
-}
-
-std::string diffModels(const model::ObjectModel& a, const model::ObjectModel& b) {
-  if (a.id != b.id) return absl::StrFormat("id %d vs %d", a.id, b.id);
-  if (const std::string d = diffLayers(a.grid, b.grid); !d.empty()) return "grid: " + d;
-  if (a.surface_voxels != b.surface_voxels) return "surface voxels differ";
-  if (a.cloud.points != b.cloud.points) return "cloud points differ";
-  if (a.cloud.normals != b.cloud.normals) return "cloud normals differ";
-  if (!(a.cloud.colors == b.cloud.colors)) return "cloud colours differ";
-  if (a.keypoint_indices != b.keypoint_indices) return "keypoints differ";
-  if (a.descriptors != b.descriptors) return "descriptors differ";
-  if (a.planar != b.planar || a.plane_inlier_ratio != b.plane_inlier_ratio) return "planarity differs";
-  if (a.structure != b.structure) return "structure differs";
-  if (a.timings.cloud_ms != b.timings.cloud_ms || a.timings.descriptors_ms != b.timings.descriptors_ms) {
-    return "timings differ";
-  }
-  if (a.observations.size() != b.observations.size()) return "observation count differs";
-  for (size_t k = 0; k < a.observations.size(); ++k) {
-    const auto& x = a.observations[k];
-    const auto& y = b.observations[k];
-    if (x.session != y.session || x.label != y.label) return absl::StrFormat("observation %d differs", k);
-    if (!(x.T_world_object.matrix() == y.T_world_object.matrix()) ||
-        !(x.T_object_segment.matrix() == y.T_object_segment.matrix())) {
-      return absl::StrFormat("pose of observation %d differs", k);
-    }
-  }
-  return "";
 }
 
 }  // namespace objdb::testing

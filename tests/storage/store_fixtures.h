@@ -9,6 +9,7 @@
 
 #include "core/database/model_store.h"
 #include "core/model/object_model.h"
+#include "tests/support/model_compare.h"  // diffModels, diffLayers
 
 namespace objdb::testing {
 
@@ -20,9 +21,5 @@ model::ObjectModel makeStoreModel(uint32_t seed, int observations);
 bool wholeModel(const model::ObjectModel& m);
 
 database::RawSegmentRecord makeRawSegment(const std::string& session, uint32_t label, uint32_t seed);
-
-// Field-by-field, bit-exact comparisons; an empty string when equal, else what differs.
-std::string diffModels(const model::ObjectModel& a, const model::ObjectModel& b);
-std::string diffLayers(const tsdf::TsdfLayer& a, const tsdf::TsdfLayer& b);
 
 }  // namespace objdb::testing

@@ -7,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "tests/support/model_compare.h"
 #include "tests/support/object_scenes.h"
 
 namespace objdb::database {
@@ -631,6 +632,13 @@ TEST(ObjectDatabase, TwoModelsThatBothTakeOneSegmentBecomeOne) {
     ASSERT_EQ(f.store.modelIds().value(), std::vector<int64_t>{whole.model_id});
     auto model = f.store.model(whole.model_id).value();
     ASSERT_EQ(model->observations.size(), 3u);
+    // The merge rebuilt the one-segment model from both segments; the joined model's segment
+    // was fused into that: the model all three segments make.
+    EXPECT_EQ(whole.merge_fused_segments, 3u);
+    EXPECT_EQ(objdb::testing::diffModels(
+                  *model, objdb::testing::rebuiltFromSegments(f.store, *model, params()).value(),
+                  false),
+              "");
     // Every pose where the object was: in the model frame (the first model's), monday's world
     // when the left half defined it, each session's true pose relative to monday's.
     const Transform frame = model->observations[0].session == "monday"
