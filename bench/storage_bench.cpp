@@ -143,7 +143,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   t = Clock::now();
-  const auto entries = (*reopened)->matchEntries().value();
+  auto entries = (*reopened)->matchEntries().value();
   std::vector<model::Fpfh> all;
   for (const auto& e : entries.entries) all.insert(all.end(), e.descriptors.begin(), e.descriptors.end());
   const double entries_s = secondsSince(t);
@@ -155,8 +155,8 @@ int main(int argc, char** argv) {
   // The prefilter as the database keeps it (core/database/prefilter_index.h): loaded once, then
   // one model put per insert, against a full rebuild of the one kd-tree per insert (before).
   database::PrefilterIndex prefilter;
-  std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> loaded;
-  for (const auto& e : entries.entries) loaded.emplace_back(e.id, &e.descriptors);
+  std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>> loaded;  // load takes them
+  for (auto& e : entries.entries) loaded.emplace_back(e.id, &e.descriptors);
   t = Clock::now();
   prefilter.load(loaded);
   const double prefilter_load_s = secondsSince(t);

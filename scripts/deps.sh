@@ -11,7 +11,7 @@ set -euo pipefail
 PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libabsl-dev
-  libpcl-dev libopencv-dev libeigen3-dev
+  libpcl-dev libflann-dev liblz4-dev libopencv-dev libeigen3-dev
   libsqlite3-dev libzstd-dev zlib1g-dev
   postgresql libpq-dev
   libspdlog-dev libfmt-dev nlohmann-json3-dev

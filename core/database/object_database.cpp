@@ -50,9 +50,9 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
   if (writer != nullptr) {
     OBJDB_ASSIGN_OR_RETURN(db->applied_seq_, store->modelChangeSeq());
   }
-  OBJDB_ASSIGN_OR_RETURN(const MatchEntries entries, store->matchEntries());
-  std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> matchable;
-  for (const auto& e : entries.entries) {
+  OBJDB_ASSIGN_OR_RETURN(MatchEntries entries, store->matchEntries());
+  std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>> matchable;
+  for (auto& e : entries.entries) {
     for (const auto& key : e.segments) db->segment_model_[key] = e.id;
     if (e.matchable(params.model)) matchable.emplace_back(e.id, &e.descriptors);
   }

@@ -36,10 +36,16 @@ bool PrefilterIndex::alive(const Tree& tree, size_t i) const {
 std::unique_ptr<PrefilterIndex::Tree> PrefilterIndex::rebuild(
     std::vector<std::unique_ptr<Tree>> trees) {
   auto out = std::make_unique<Tree>();
+  size_t live = 0;
+  for (const auto& t : trees) live += t->live();
+  std::vector<model::Fpfh> descriptors;
+  descriptors.reserve(live);
+  out->owner.reserve(live);
+  out->sequence.reserve(live);
   for (const auto& t : trees) {
-    for (size_t i = 0; i < t->descriptors.size(); ++i) {
+    for (size_t i = 0; i < t->size(); ++i) {
       if (!alive(*t, i)) continue;
-      out->descriptors.push_back(t->descriptors[i]);
+      descriptors.push_back(t->descriptors()[i]);
       out->owner.push_back(t->owner[i]);
       out->sequence.push_back(t->sequence[i]);
     }
@@ -48,9 +54,9 @@ std::unique_ptr<PrefilterIndex::Tree> PrefilterIndex::rebuild(
   for (size_t i = 0; i < out->owner.size(); ++i) {
     if (i == 0 || out->owner[i] != out->owner[i - 1]) where_[out->owner[i]].tree = out.get();
   }
-  if (out->descriptors.empty()) return nullptr;
-  out->index = std::make_unique<matching::DescriptorIndex>(out->descriptors, epsilon_);
-  rebuilt_ += out->descriptors.size();
+  if (descriptors.empty()) return nullptr;
+  rebuilt_ += descriptors.size();
+  out->index = std::make_unique<matching::DescriptorIndex>(std::move(descriptors), epsilon_);
   return out;
 }
 
@@ -61,7 +67,7 @@ void PrefilterIndex::erase(int64_t id) {
   tree->dead += it->second.count;
   live_ -= it->second.count;
   where_.erase(it);
-  if (2 * tree->dead < tree->descriptors.size()) return;
+  if (2 * tree->dead < tree->size()) return;
   const auto slot = std::find_if(trees_.begin(), trees_.end(),
                                  [&](const std::unique_ptr<Tree>& t) { return t.get() == tree; });
   std::vector<std::unique_ptr<Tree>> one;
@@ -75,40 +81,54 @@ void PrefilterIndex::erase(int64_t id) {
 }
 
 void PrefilterIndex::load(
-    const std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>>& models, int threads) {
+    const std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>>& models, int threads) {
   size_t total = 0;
   for (const auto& [id, descriptors] : models) total += descriptors->size();
-  // `threads` trees of about equal size (a model's descriptors stay in one), built in parallel.
+  // `threads` trees of about equal size (a model's descriptors stay in one), built in parallel:
+  // first which tree each model goes to, so that each tree's list is allocated once.
   const size_t parts = size_t(std::max(1, threads));
   const size_t per_tree = std::max<size_t>(1, (total + parts - 1) / parts);
+  std::vector<size_t> tree_of(models.size());
+  std::vector<size_t> sizes(1, 0);
+  for (size_t m = 0; m < models.size(); ++m) {
+    const size_t n = models[m].second->size();
+    if (n == 0) continue;
+    if (sizes.back() >= per_tree && sizes.size() < parts) sizes.push_back(0);
+    tree_of[m] = sizes.size() - 1;
+    sizes.back() += n;
+  }
   std::vector<std::unique_ptr<Tree>> loaded;
-  loaded.push_back(std::make_unique<Tree>());
-  for (const auto& [id, descriptors] : models) {
+  std::vector<std::vector<model::Fpfh>> lists(sizes.size());
+  for (size_t t = 0; t < sizes.size(); ++t) {
+    loaded.push_back(std::make_unique<Tree>());
+    lists[t].reserve(sizes[t]);
+    loaded[t]->owner.reserve(sizes[t]);
+    loaded[t]->sequence.reserve(sizes[t]);
+  }
+  for (size_t m = 0; m < models.size(); ++m) {
+    const auto& [id, descriptors] = models[m];
     erase(id);
     if (descriptors->empty()) continue;
-    if (loaded.back()->descriptors.size() >= per_tree && loaded.size() < parts) {
-      loaded.push_back(std::make_unique<Tree>());
-    }
-    Tree* tree = loaded.back().get();
+    Tree* tree = loaded[tree_of[m]].get();
+    std::vector<model::Fpfh>& list = lists[tree_of[m]];
     where_[id] = Place{tree, next_sequence_, descriptors->size()};
-    for (const auto& d : *descriptors) {
-      tree->descriptors.push_back(d);
-      tree->owner.push_back(id);
-      tree->sequence.push_back(next_sequence_++);
-    }
+    list.insert(list.end(), descriptors->begin(), descriptors->end());
+    tree->owner.insert(tree->owner.end(), descriptors->size(), id);
+    for (size_t i = 0; i < descriptors->size(); ++i) tree->sequence.push_back(next_sequence_++);
     live_ += descriptors->size();
+    std::vector<model::Fpfh>().swap(*descriptors);  // taken: its memory goes now
   }
   std::vector<std::thread> builders;
-  for (const auto& tree : loaded) {
-    if (tree->descriptors.empty()) continue;
-    rebuilt_ += tree->descriptors.size();
-    builders.emplace_back([this, t = tree.get()] {
-      t->index = std::make_unique<matching::DescriptorIndex>(t->descriptors, epsilon_);
+  for (size_t t = 0; t < loaded.size(); ++t) {
+    if (lists[t].empty()) continue;
+    rebuilt_ += lists[t].size();
+    builders.emplace_back([this, tree = loaded[t].get(), list = &lists[t]] {
+      tree->index = std::make_unique<matching::DescriptorIndex>(std::move(*list), epsilon_);
     });
   }
   for (auto& builder : builders) builder.join();
   for (auto& tree : loaded) {
-    if (!tree->descriptors.empty()) trees_.push_back(std::move(tree));
+    if (tree->index != nullptr) trees_.push_back(std::move(tree));
   }
 }
 
@@ -116,11 +136,10 @@ void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors
   erase(id);
   if (descriptors.empty()) return;
   auto tree = std::make_unique<Tree>();
-  tree->descriptors = descriptors;
   tree->owner.assign(descriptors.size(), id);
   const uint64_t first = next_sequence_;
   for (size_t i = 0; i < descriptors.size(); ++i) tree->sequence.push_back(next_sequence_++);
-  tree->index = std::make_unique<matching::DescriptorIndex>(tree->descriptors, epsilon_);
+  tree->index = std::make_unique<matching::DescriptorIndex>(descriptors, epsilon_);
   rebuilt_ += descriptors.size();
   where_[id] = Place{tree.get(), first, descriptors.size()};
   live_ += descriptors.size();
@@ -146,7 +165,7 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh
   for (const auto& tree : trees_) {
     // The k nearest live ones of this tree: ask for k (more when it has dead ones), and again for
     // four times as many while dead ones among them leave fewer than k and the tree has more.
-    const size_t n = tree->descriptors.size();
+    const size_t n = tree->size();
     size_t want = std::min(n, size_t(k) + std::min(tree->dead, size_t(k)));
     std::vector<std::pair<uint32_t, float>> hits;
     while (true) {
@@ -160,7 +179,7 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh
     for (const auto& [i, similarity] : hits) {
       if (!alive(*tree, i) || taken == size_t(k)) continue;
       ++taken;
-      found.emplace_back(squaredDistance(query, tree->descriptors[i]), tree->owner[i],
+      found.emplace_back(squaredDistance(query, tree->descriptors()[i]), tree->owner[i],
                          tree->sequence[i], similarity);
     }
   }
@@ -178,11 +197,11 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearestExhaustive(
   std::vector<Scanned> scanned;
   scanned.reserve(live_);
   for (const auto& tree : trees_) {
-    for (size_t i = 0; i < tree->descriptors.size(); ++i) {
+    for (size_t i = 0; i < tree->size(); ++i) {
       if (!alive(*tree, i)) continue;
-      scanned.push_back({{squaredDistance(query, tree->descriptors[i]), tree->owner[i],
+      scanned.push_back({{squaredDistance(query, tree->descriptors()[i]), tree->owner[i],
                           tree->sequence[i], 0.0f},
-                         &tree->descriptors[i]});
+                         &tree->descriptors()[i]});
     }
   }
   const size_t keep = std::min(scanned.size(), size_t(k));

@@ -29,12 +29,15 @@ float fpfhSimilarity(const model::Fpfh& a, const model::Fpfh& b);
 // may hold a descriptor closer than the k-th found so far divided by 1 + ε), and deterministic.
 class DescriptorIndex {
  public:
-  explicit DescriptorIndex(const std::vector<model::Fpfh>& descriptors, float epsilon = 0.0f);
+  // Takes the descriptors (pass a copy to keep them): one FLANN kd-tree over them, which keeps
+  // one copy of its own in leaf order.
+  explicit DescriptorIndex(std::vector<model::Fpfh> descriptors, float epsilon = 0.0f);
   ~DescriptorIndex();
   DescriptorIndex(DescriptorIndex&&) noexcept;
   DescriptorIndex& operator=(DescriptorIndex&&) noexcept;
 
   size_t size() const { return descriptors_.size(); }
+  const std::vector<model::Fpfh>& descriptors() const { return descriptors_; }
   // Up to k nearest descriptors: (index, similarity), most similar first.
   std::vector<std::pair<uint32_t, float>> nearest(const model::Fpfh& query, int k) const;
 

@@ -112,16 +112,20 @@ TEST(PrefilterIndex, BuildsEachDescriptorLogarithmicallyOftenNotOncePerInsert) {
 TEST(PrefilterIndex, ALoadOnTwoThreadsAnswersAsOnOne) {
   std::mt19937 rng(13);
   std::vector<std::vector<model::Fpfh>> descriptors;
-  std::vector<std::pair<int64_t, const std::vector<model::Fpfh>*>> models;
   for (int m = 0; m < 30; ++m) descriptors.push_back(randomDescriptors(&rng, size_t(5 + m % 7)));
   Reference reference;
+  for (int m = 0; m < 30; ++m) reference.put(m + 1, descriptors[size_t(m)]);
+  // Each load takes the lists it is given (and leaves them empty): one copy each.
+  std::vector<std::vector<model::Fpfh>> for_one = descriptors, for_two = descriptors;
+  std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>> models_one, models_two;
   for (int m = 0; m < 30; ++m) {
-    models.emplace_back(m + 1, &descriptors[size_t(m)]);
-    reference.put(m + 1, descriptors[size_t(m)]);
+    models_one.emplace_back(m + 1, &for_one[size_t(m)]);
+    models_two.emplace_back(m + 1, &for_two[size_t(m)]);
   }
   PrefilterIndex one, two;
-  one.load(models, 1);
-  two.load(models, 2);
+  one.load(models_one, 1);
+  two.load(models_two, 2);
+  for (const auto& taken : for_two) EXPECT_TRUE(taken.empty());
   EXPECT_EQ(one.trees(), 1u);
   EXPECT_EQ(two.trees(), 2u);
   EXPECT_EQ(two.size(), one.size());
@@ -142,8 +146,9 @@ TEST(PrefilterIndex, ALoadOnTwoThreadsAnswersAsOnOne) {
 TEST(PrefilterIndex, LoadedModelsAreFoundAndReplacedLikePutOnes) {
   std::mt19937 rng(3);
   const auto a = randomDescriptors(&rng, 10), b = randomDescriptors(&rng, 10);
+  auto a_taken = a, b_taken = b;
   PrefilterIndex index;
-  index.load({{1, &a}, {2, &b}});
+  index.load({{1, &a_taken}, {2, &b_taken}});
   EXPECT_EQ(index.size(), 20u);
   EXPECT_EQ(index.nearest(a[3], 1).at(0).owner, 1);
   EXPECT_FLOAT_EQ(index.nearest(a[3], 1).at(0).similarity, 1.0f);
