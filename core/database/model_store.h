@@ -25,6 +25,8 @@ struct SegmentKey {
   uint32_t label = 0;  // GSM label
   auto operator<=>(const SegmentKey&) const = default;
 };
+// The raw segment an observation of a model is.
+inline SegmentKey keyOf(const model::Observation& o) { return {o.session, o.label}; }
 
 // A raw segment as the database keeps it: its grid in its own frame and where that frame is.
 struct RawSegmentRecord {

@@ -20,8 +20,6 @@ double msSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 }
 
-SegmentKey keyOf(const model::Observation& o) { return {o.session, o.label}; }
-
 // fn(i) for every i in [begin, end), on up to `threads` threads, the caller one of them; each i
 // is taken by the next free thread.
 void parallelFor(size_t begin, size_t end, size_t threads, const std::function<void(size_t)>& fn) {

@@ -15,8 +15,6 @@
 namespace objdb::database {
 namespace {
 
-SegmentKey keyOf(const model::Observation& o) { return {o.session, o.label}; }
-
 // The grid and surface voxels of segments fused in order.
 class Fusion {
  public:
