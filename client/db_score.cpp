@@ -10,6 +10,7 @@
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_format.h"
 #include "core/common/grid_key.h"
+#include "core/common/plane_spans.h"
 #include "core/model/features.h"
 
 namespace objdb::cli {
@@ -184,6 +185,58 @@ void printTruthScore(const TruthScore& s) {
     std::printf("%-22s %8zu %10zu %8zu %14.2f\n", k.kind.c_str(), k.objects, k.segments,
                 k.models, k.models_per_object);
   }
+}
+
+CensusScore scoreCensus(const std::vector<Row>& rows) {
+  CensusScore s;
+  double structure_points = 0.0, all_points = 0.0;
+  for (const Row& row : rows) {
+    const Eigen::Vector3f spans = principalSpans(row.points);
+    const size_t n = row.placements.size();
+    s.placements += n;
+    all_points += double(row.summary.num_points) * double(n);
+    if (row.summary.structure) {
+      s.structure += n;
+      structure_points += double(row.summary.num_points) * double(n);
+      continue;
+    }
+    s.planar += row.summary.planar ? n : 0;
+    s.largest_object_m = std::max(s.largest_object_m, spans(0));
+    if (spans(0) >= 0.6f && spans(0) <= CensusScore::kFurniture && spans(2) >= 0.3f) {
+      s.chair_sized += n;
+    }
+    if (spans(0) > CensusScore::kGiant) {
+      s.giant += n;
+      s.findings.push_back(absl::StrFormat(
+          "giant object: model %d, %.2f x %.2f x %.2f m, %d points, %d placement(s), first in %s",
+          row.summary.id, spans(0), spans(1), spans(2), row.summary.num_points, n,
+          row.placements.empty() ? std::string("-") : row.placements.front().session));
+    } else if (spans(0) > CensusScore::kFurniture) {
+      s.large += n;
+    } else if (spans(0) >= CensusScore::kSmall) {
+      s.furniture += n;
+    } else {
+      s.small += n;
+    }
+    s.models_at_two_places += places(row) >= 2 ? 1 : 0;
+  }
+  s.structure_point_share = all_points > 0.0 ? structure_points / all_points : 0.0;
+  return s;
+}
+
+void printCensusScore(const CensusScore& s) {
+  for (const auto& f : s.findings) std::printf("%s\n", f.c_str());
+  line("placements (raw segments in the database)", std::to_string(s.placements));
+  line("  structure / planar (the database's flags)",
+       absl::StrFormat("%d / %d", s.structure, s.planar));
+  line("  objects < 0.3 m / 0.3-1.3 m / 1.3-2.5 m (largest span)",
+       absl::StrFormat("%d / %d / %d", s.small, s.furniture, s.large));
+  line("  giant objects (not structure, > 2.5 m)", std::to_string(s.giant));
+  line("  chair-sized (0.6-1.3 m, smallest span >= 0.3 m)", std::to_string(s.chair_sized));
+  line("largest object (not structure)", absl::StrFormat("%.2f m", s.largest_object_m));
+  line("structure's share of the placements' model points",
+       absl::StrFormat("%.0f %%", 100.0 * s.structure_point_share));
+  line("objects at >= 2 places", std::to_string(s.models_at_two_places));
 }
 
 namespace {

@@ -54,6 +54,28 @@ struct TruthScore {
 TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth);
 void printTruthScore(const TruthScore& score);
 
+// What the database holds without any ground truth: its placements by the size of their model
+// (full spans along the principal axes of its points, largest first), giant objects (not
+// structure, larger than any furniture: more than 2.5 m; a whole room stored as an object),
+// the structure share, and objects found at two or more places.
+struct CensusScore {
+  static constexpr float kSmall = 0.3f;      // m: a mug, a helmet, a box on a shelf
+  static constexpr float kFurniture = 1.3f;  // m: a chair is under 1.3 m
+  static constexpr float kGiant = 2.5f;      // m: no furniture is larger
+  size_t placements = 0;
+  size_t structure = 0, planar = 0;          // placements flagged so by the database
+  size_t small = 0, furniture = 0, large = 0, giant = 0;  // the other placements by size
+  // Of them chair-sized, as the plane-removal + DBSCAN peer counts its clusters: largest span
+  // 0.6–1.3 m, smallest at least 0.3 m (peers/plane_dbscan.py, on principal spans here).
+  size_t chair_sized = 0;
+  double structure_point_share = 0.0;  // share of all placements' model points on structure
+  size_t models_at_two_places = 0;     // objects (not structure) at >= 2 places
+  float largest_object_m = 0.0f;       // the largest placement not flagged structure
+  std::vector<std::string> findings;   // one line per giant object
+};
+CensusScore scoreCensus(const std::vector<Row>& rows);
+void printCensusScore(const CensusScore& score);
+
 struct StructureScore {
   size_t sessions_with_scene = 0;
   size_t planes = 0;              // dominant planes found over all sessions' scenes

@@ -241,6 +241,8 @@ int runEvalCommand(int argc, char** argv) {
   } else {
     std::printf("no ground truth (not every dataset has instances/ and objects.json)\n");
   }
+  std::printf("\ncensus (what a failure looks like: giant objects, structure share):\n");
+  cli::printCensusScore(cli::scoreCensus(rows));
   auto structure = cli::scoreStructure(**store, rows);
   if (!structure.ok()) return cli::reportError(kCommand, structure.status());
   std::printf("\nagainst the scenes' dominant planes:\n");

@@ -117,6 +117,16 @@ int runGsmCommand(int argc, char** argv) {
               double(map->labelBytes()) / 1e6);
   std::printf("mesh coloured by label: %zu vertices, %zu triangles -> %s\n", mesh.vertices.size(),
               mesh.triangles.size(), job.out.c_str());
+  // What the grouping made of the map at its end (docs/structure.md).
+  const gsm::ObjectGroups groups = map->groupObjects();
+  size_t objects = 0;
+  for (const auto& [id, members] : groups.members) objects += groups.structure.contains(id) ? 0 : 1;
+  std::printf("room structure: %s\n", groups.room.summary().c_str());
+  std::printf("objects: %zu of %zu labels (%zu structure labels, %zu of them larger than furniture); "
+              "%zu voxels cut from objects on structure; %zu standing units kept apart; %zu objects "
+              "larger than furniture fell back to their parts\n",
+              objects, groups.object_of.size(), groups.structure.size(), groups.giant_labels,
+              groups.cut.size(), groups.standing_cuts, groups.giant_fallbacks);
   return rejected == 0 ? 0 : 1;
 }
 

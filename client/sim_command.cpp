@@ -1,5 +1,5 @@
-// `objdb sim`: writes a synthetic preset (e.g. the three-session lounge) or a scene file to
-// dataset folders in objdb's layout, with a progress bar and a visibility summary.
+// `objdb sim`: writes a synthetic preset (the three-session lounge, the two-session kitchen) or a
+// scene file to dataset folders in objdb's layout, with a progress bar and a visibility summary.
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -11,6 +11,7 @@
 #include "client/progress.h"
 #include "core/io/mesh_io.h"
 #include "core/sim/generator.h"
+#include "core/sim/kitchen.h"
 #include "core/sim/lounge.h"
 #include "core/sim/object_library.h"
 
@@ -27,13 +28,16 @@ depth/, color/, instances/ (ground truth), poses.txt, intrinsics.json, objects.j
 
   --preset NAME        lounge     three sessions, 17 objects of 11 kinds (paper §IV), one folder
                                   per session (DIR/session_1 ..) and DIR/objects.json
+                       kitchen    two sessions: fitted kitchen, table, 4 identical chairs, mugs
                        two-boxes  two boxes on a floor, 30 frames
   --scene FILE         a scene file (docs/synthetic-world.md); written to DIR
   --out DIR            output folder
-  --camera NAME        vga (640x480) or tango (224x172); default: the preset's (lounge: tango)
-  --frames N           frames per session (lounge default 300)
-  --seed N             noise seed (default 1)
+  --camera NAME        vga (640x480) or tango (224x172); default: the preset's (lounge: tango,
+                       kitchen: vga)
+  --frames N           frames per session (lounge default 300, kitchen 240)
+  --seed N             noise seed, kitchen: also the pose drift's (default 1)
   --no-noise           exact depth (no noise, dropouts or quantisation beyond depth_scale)
+  --no-drift           kitchen: write the poses the images were rendered from (no pose drift)
   --no-color           skip the colour images
   --threads N          frames rendered in parallel (default 2)
   --overwrite          replace datasets already in DIR
@@ -46,7 +50,7 @@ struct SimArgs {
   std::string preset, scene_file, out, camera, export_dir;
   int frames = 0;
   uint64_t seed = 1;
-  bool seed_set = false, noise = true, color = true, overwrite = false, list = false;
+  bool seed_set = false, noise = true, drift = true, color = true, overwrite = false, list = false;
   int threads = 2;
 };
 
@@ -133,6 +137,8 @@ int runSimCommand(int argc, char** argv) {
       args.threads = int(n);
     } else if (a == "--no-noise") {
       args.noise = false;
+    } else if (a == "--no-drift") {
+      args.drift = false;
     } else if (a == "--no-color") {
       args.color = false;
     } else if (a == "--overwrite") {
@@ -181,12 +187,25 @@ int runSimCommand(int argc, char** argv) {
     if (!lounge.ok()) return reportError(lounge.status());
     scenes = std::move(*lounge);
     multi_session = true;
+  } else if (args.preset == "kitchen") {
+    sim::KitchenOptions options;
+    if (!args.camera.empty()) options.camera = args.camera;
+    if (args.frames > 0) options.frames_per_session = args.frames;
+    options.seed = args.seed;
+    options.noise = args.noise;
+    options.drift = args.drift;
+    auto kitchen = sim::kitchenPreset(options);
+    if (!kitchen.ok()) return reportError(kitchen.status());
+    scenes = std::move(*kitchen);
+    multi_session = true;
   } else if (args.preset == "two-boxes") {
     const std::string camera = args.camera.empty() ? "vga" : args.camera;
     if (auto k = intrinsicsPreset(camera); !k.ok()) return reportError(k.status());
     scenes.push_back(sim::twoBoxesScene(camera, args.frames > 0 ? args.frames : 30));
   } else if (!args.preset.empty()) {
-    return usageError("unknown preset '" + args.preset + "' (known: lounge, two-boxes)");
+    std::string known;
+    for (const auto& p : sim::presetNames()) known += (known.empty() ? "" : ", ") + p;
+    return usageError("unknown preset '" + args.preset + "' (known: " + known + ")");
   } else {
     auto scene = sim::loadSceneFile(args.scene_file);
     if (!scene.ok()) return reportError(scene.status());
@@ -201,7 +220,8 @@ int runSimCommand(int argc, char** argv) {
   }
   for (auto& scene : scenes) {
     if (!args.noise) scene.noise.enabled = false;
-    if (args.seed_set && args.preset != "lounge") scene.noise.seed = args.seed;
+    // The multi-session presets seed each session themselves (seed + k).
+    if (args.seed_set && !multi_session) scene.noise.seed = args.seed;
   }
   return runScenes(scenes, args.out, multi_session, args);
 }

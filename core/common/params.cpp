@@ -70,6 +70,12 @@ Status GsmParams::validate() const {
       inRange(object_min_contact_voxels, 1, 1 << 20, "gsm.object_min_contact_voxels"));
   OBJDB_RETURN_IF_ERROR(
       inRange(object_structure_extent_m, 0.05, 100.0, "gsm.object_structure_extent_m"));
+  OBJDB_RETURN_IF_ERROR(inRange(structure_min_span_m, 0.0, 100.0, "gsm.structure_min_span_m"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(structure_max_behind_share, 0.0, 1.0, "gsm.structure_max_behind_share"));
+  OBJDB_RETURN_IF_ERROR(inRange(structure_normal_deg, 1.0, 89.0, "gsm.structure_normal_deg"));
+  OBJDB_RETURN_IF_ERROR(inRange(structure_band_sigmas, 0.5, 20.0, "gsm.structure_band_sigmas"));
+  OBJDB_RETURN_IF_ERROR(inRange(object_max_extent_m, 0.1, 1000.0, "gsm.object_max_extent_m"));
   OBJDB_RETURN_IF_ERROR(inRange(object_support_probe_m, 0.0, 5.0, "gsm.object_support_probe_m"));
   OBJDB_RETURN_IF_ERROR(
       inRange(object_support_max_ratio, 0.0, 10.0, "gsm.object_support_max_ratio"));

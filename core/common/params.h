@@ -69,7 +69,7 @@ struct GsmParams {
   int extraction_age_frames = 10;        // a label untouched this long is extracted
   // Whole objects (ours; core/gsm/objects.h): above the convex labels, the labels that
   // touch (voxels within object_gap_m) are grouped into objects, except across room structure
-  // (a planar label at least object_structure_extent_m wide along both in-plane axes) and
+  // (labels mostly on the room's bounding faces, core/gsm/room_structure.h) and
   // across a support (a label resting on the face of a planar label that surrounds the contact
   // on all four sides within object_support_probe_m: a mug on a table, a box on a shelf).
   // `objects` true: the GSM extracts whole objects (a segment per group, with its parts);
@@ -78,7 +78,31 @@ struct GsmParams {
   bool objects = true;
   float object_gap_m = 0.02f;
   int object_min_contact_voxels = 3;  // voxels of two labels next to the other, to connect
+  // Room structure (core/gsm/room_structure.h): planes found in the whole map's surface, each
+  // with a distance band measured from its own voxels' spread (so it grows with the depth noise
+  // σ(z) at the depth it was seen from, and with pose drift), at least one voxel. A face of a
+  // plane bounds the room (a floor, a wall, a ceiling, a cabinet front or a counter top) when it
+  // spans at least object_structure_extent_m along its longer in-plane axis and
+  // structure_min_span_m along its shorter one (bigger than a face of furniture: a chair's seat
+  // or back, a box's side is under 1 m × 0.5 m) and at most structure_max_behind_share of its
+  // voxels' count of observed surface lies behind it inside its footprint (nothing was seen
+  // behind a wall or a floor; under a table top there are chairs and floor). Voxels on such a
+  // face are a barrier: labels mostly on it are structure, other labels' voxels on it are cut
+  // from their objects.
   float object_structure_extent_m = 1.0f;
+  float structure_min_span_m = 0.5f;
+  float structure_max_behind_share = 0.05f;
+  // A surface voxel joins a plane direction when its TSDF-gradient normal lies within this
+  // angle: TSDF normals of a noisy plane at 2 cm voxels scatter by 10–20°, the distance band
+  // then decides.
+  float structure_normal_deg = 30.0f;
+  // A plane's distance band: this many robust σ (1.4826 · MAD) of its voxels' offsets, at least a
+  // voxel (3: a Gaussian's 99.7 %).
+  float structure_band_sigmas = 3.0f;
+  // An object larger than furniture can be (a dining table is about 2 m, a sofa 2.3 m; a room's
+  // wall or floor is more) is never one object: it falls back to its parts (counted,
+  // ObjectGroups::giant_fallbacks), and a single part that large is room structure.
+  float object_max_extent_m = 2.5f;
   float object_support_probe_m = 0.3f;
   // ... and only when the object resting there spans at most this share of the support's extent
   // along both of its axes (a pedestal carrying a seat as wide as its base is not a mug).

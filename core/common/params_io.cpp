@@ -50,6 +50,11 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("object_gap_m", p.object_gap_m);
   fn("object_min_contact_voxels", p.object_min_contact_voxels);
   fn("object_structure_extent_m", p.object_structure_extent_m);
+  fn("structure_min_span_m", p.structure_min_span_m);
+  fn("structure_max_behind_share", p.structure_max_behind_share);
+  fn("structure_normal_deg", p.structure_normal_deg);
+  fn("structure_band_sigmas", p.structure_band_sigmas);
+  fn("object_max_extent_m", p.object_max_extent_m);
   fn("object_support_probe_m", p.object_support_probe_m);
   fn("object_support_max_ratio", p.object_support_max_ratio);
   fn("object_annex_height_m", p.object_annex_height_m);

@@ -10,6 +10,7 @@
 
 #include "absl/strings/str_format.h"
 #include "core/common/logging.h"
+#include "core/common/plane_spans.h"
 #include "core/model/structure.h"
 
 namespace objdb::database {
@@ -489,6 +490,10 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
     }
     report.grown_plane_span_m = *grown;
     incoming.structure = report.grown_plane_span_m >= params_.model.structure_min_extent_m;
+    // What is larger than furniture can be is room structure, as the GSM's grouping decides
+    // for its labels (core/gsm/objects.h): a bent strip of floor, a counter's whole run.
+    incoming.structure = incoming.structure || principalSpans(incoming.cloud.points)(0) >
+                                                   params_.gsm.object_max_extent_m;
     report.timings.cloud_ms += msSince(t);  // part of P: the planarity and structure tests
   }
   report.planar = incoming.planar;

@@ -7,6 +7,7 @@
 #include <tuple>
 
 #include "core/common/grid_key.h"
+#include "core/common/logging.h"
 
 namespace objdb::gsm {
 namespace {
@@ -370,6 +371,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
     }
   }
   camera_positions_.push_back(T_world_camera.translation().cast<float>());
+  camera_up_sum_ -= T_world_camera.linear().col(1);  // image y points down
   ++frame_;
   result.timings.voting_ms = ms(t_associated, Clock::now());
   return result;
@@ -390,13 +392,15 @@ void appendBlockVoxels(const tsdf::BlockIndex& b, size_t count, int vps, Keep&& 
   }
 }
 
-// An object's voxels as objects.h defines them: its parts' own (`voxels`), less those another
-// object took from a structure label, plus the structure voxels it took itself.
+// An object's voxels as objects.h defines them: its parts' own (`voxels`), less those on a
+// bounding face of the room (cut) and those another object took from a structure label, plus the
+// structure voxels it took itself.
 void applyAnnexed(Label id, const ObjectGroups& groups, std::vector<tsdf::VoxelIndex>* voxels) {
-  if (groups.annexed_part.empty()) return;
+  if (groups.annexed_part.empty() && groups.cut.empty()) return;
   voxels->erase(std::remove_if(voxels->begin(), voxels->end(),
                                [&](const tsdf::VoxelIndex& v) {
-                                 return groups.annexed_part.contains(packGridKey(v));
+                                 const uint64_t key = packGridKey(v);
+                                 return groups.annexed_part.contains(key) || groups.cut.contains(key);
                                }),
                 voxels->end());
   const auto it = groups.annexed.find(id);
@@ -483,7 +487,14 @@ std::vector<RawSegment> Gsm::extractIdle(bool flush) {
 }
 
 ObjectGroups Gsm::groupObjects() const {
-  return gsm::groupObjects(layer_, mainLabelBlocks(), params_);
+  return gsm::groupObjects(layer_, mainLabelBlocks(), params_, upHint());
+}
+
+Eigen::Vector3f Gsm::upHint() const {
+  if (camera_positions_.empty()) return Eigen::Vector3f::Zero();
+  const Eigen::Vector3d mean = camera_up_sum_ / double(camera_positions_.size());
+  return mean.norm() >= 0.5 ? Eigen::Vector3f(mean.normalized().cast<float>())
+                            : Eigen::Vector3f::Zero();
 }
 
 std::vector<tsdf::VoxelIndex> Gsm::voxelsOf(const std::vector<Label>& labels) const {
@@ -557,6 +568,10 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
   if (flush || grouped_frame_ < 0 || frame_ - grouped_frame_ >= params_.object_update_frames) {
     grouped_frame_ = frame_;
     groups_ = groupObjects();
+    logger("gsm")->debug("frame {}: room structure: {}; {} giant objects fell back to parts, {} "
+                         "standing units kept apart",
+                         frame_, groups_.room.summary(), groups_.giant_fallbacks,
+                         groups_.standing_cuts);
     // An object extracted before whose id is no object now went into another (or vanished).
     std::vector<Label> gone;
     for (const auto& [id, extracted] : extracted_objects_) {

@@ -121,6 +121,9 @@ class Gsm {
   std::vector<RawSegment> extractIdle(bool flush = false);
   // The map's labels grouped into objects now (objects.h).
   ObjectGroups groupObjects() const;
+  // The cameras' mean image up (world; unit), or zero when the frames so far do not agree on one
+  // (their mean is shorter than half a unit: a camera rolled over, or no frame yet).
+  Eigen::Vector3f upHint() const;
   // Labels (objects) extracted before whose segment no longer exists: merged into another label (whose
   // next extraction holds their voxels), or updated and then left with fewer than
   // min_label_voxels voxels because other labels took them. Whoever keeps the extracted segments drops these (otherwise one
@@ -185,6 +188,7 @@ class Gsm {
   Label next_label_ = 1;
   int64_t frame_ = 0;
   std::vector<Eigen::Vector3f> camera_positions_;  // world, one per integrated frame
+  Eigen::Vector3d camera_up_sum_ = Eigen::Vector3d::Zero();  // Σ image up (−y) in the world
   SurfaceNoise surface_noise_;
   std::unique_ptr<FrameScratch> scratch_;
 };

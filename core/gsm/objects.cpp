@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <memory>
 #include <numeric>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 
 #include "core/common/grid_key.h"
 
@@ -71,7 +73,7 @@ void orientNormal(const tsdf::TsdfLayer& layer, const std::vector<tsdf::VoxelInd
   if (vote < 0.0) shape->normal = -shape->normal;
 }
 
-void deriveShape(float voxel, float structure_extent_m, Shape* s) {
+void deriveShape(float voxel, Shape* s) {
   const double n = double(s->n);
   const Eigen::Vector3d mean = s->sum / n;
   const Eigen::Matrix3d cov = s->outer / n - mean * mean.transpose();
@@ -85,7 +87,26 @@ void deriveShape(float voxel, float structure_extent_m, Shape* s) {
   s->extent[1] = float(std::sqrt(12.0) * sigma(1));
   s->thickness = float(sigma(0) / double(voxel));
   s->planar = s->n >= 20 && sigma(0) <= std::max(1.5 * double(voxel), 0.1 * sigma(1));
-  s->structure = s->planar && s->extent[1] >= structure_extent_m;
+}
+
+// The largest full span (metres) of `voxels` along the principal axes of `shape`.
+float fullSpan(const Shape& shape, const std::vector<const std::vector<tsdf::VoxelIndex>*>& voxels,
+               float voxel) {
+  const Eigen::Vector3f axes[3] = {shape.normal, shape.axis[0], shape.axis[1]};
+  float lo[3] = {1e30f, 1e30f, 1e30f}, hi[3] = {-1e30f, -1e30f, -1e30f};
+  for (const auto* list : voxels) {
+    for (const auto& v : *list) {
+      const Eigen::Vector3f p = v.cast<float>();
+      for (int a = 0; a < 3; ++a) {
+        const float x = p.dot(axes[a]);
+        lo[a] = std::min(lo[a], x);
+        hi[a] = std::max(hi[a], x);
+      }
+    }
+  }
+  float span = 0.0f;
+  for (int a = 0; a < 3; ++a) span = std::max(span, hi[a] - lo[a] + 1.0f);
+  return span * voxel;
 }
 
 // Whether `upper` rests on planar `support` at their contact (`contact` = the support's voxels
@@ -120,7 +141,7 @@ bool restsOn(const Shape& upper, const Shape& support_shape,
       local.outer += p * p.transpose();
     }
     if (local.n < 20) return false;
-    deriveShape(voxel, 1e9f, &local);
+    deriveShape(voxel, &local);
     if (!local.planar) return false;
     orientNormal(layer, near, &local);
   }
@@ -404,12 +425,160 @@ Label findRoot(absl::flat_hash_map<Label, Label>* parent, Label l) {
   return root;
 }
 
+// Parts standing on the floor (ours): with an up direction and a floor, a label whose lowest
+// voxel lies within the floor's band (and two voxels: the cut takes the floor's own voxels from
+// it) stands on the floor, as a chair's or a table's leg does. A part carries another it touches
+// when the contact lies in the top quarter of its height above the floor: legs carry the seat
+// they end under, a table's legs its apron. Other contacts (a seat against a table's leg, a
+// seat's edge under a table top, a back on a seat) are decided by units: the parts joined by
+// carrying, which stand when any of their parts does.
+struct StandingParts {
+  bool known = false;  // up and a floor were found
+  Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+  float floor_m = 0.0f, reach_m = 0.0f, voxel = 0.0f;
+  absl::flat_hash_map<Label, std::pair<float, float>> height;  // label → lowest, highest (m)
+  // On the floor's plane (axes across up): every label's footprint (the box of its voxels),
+  // centre and voxel count.
+  Eigen::Vector3f across[2] = {Eigen::Vector3f::UnitX(), Eigen::Vector3f::UnitY()};
+  absl::flat_hash_map<Label, Eigen::AlignedBox2f> footprint;
+  absl::flat_hash_map<Label, Eigen::Vector2f> centre2d;
+  absl::flat_hash_map<Label, size_t> voxels;
+
+  bool stands(Label l) const {
+    const auto it = height.find(l);
+    return it != height.end() && it->second.first <= floor_m + reach_m;
+  }
+  float heightOf(const tsdf::VoxelIndex& v) const {
+    return up.dot((v.cast<float>() + Eigen::Vector3f::Constant(0.5f)) * voxel);
+  }
+  // Whether one of a, b stands and carries the other at their contact.
+  bool carries(Label a, Label b, const Contact& c) const {
+    if (stands(a) && stands(b)) {
+      // Two standing parts are one base when the smaller stands under the other's footprint (a
+      // leg the segmenter cut from its chair or from a cow's body), or when the lower carries
+      // the higher at its top; a chair beside a table stands apart.
+      if (under(a, b)) return true;
+      const Label lower = height.at(a).second <= height.at(b).second ? a : b;
+      return atTop(lower, c);
+    }
+    if (stands(a) == stands(b)) return false;
+    return atTop(stands(a) ? a : b, c);
+  }
+  // Whether the smaller of a, b (in voxels) has its centre over the other's footprint.
+  bool under(Label a, Label b) const {
+    const Label small = voxels.at(a) <= voxels.at(b) ? a : b, big = small == a ? b : a;
+    const auto& box = footprint.at(big);
+    const Eigen::Vector2f centre = centre2d.at(small);
+    return (centre.array() >= box.min().array() - voxel).all() &&
+           (centre.array() <= box.max().array() + voxel).all();
+  }
+  // Whether the contact lies in the top quarter of `base`'s height above the floor.
+  bool atTop(Label base, const Contact& c) const {
+    double sum = 0.0;
+    size_t n = 0;
+    for (const auto& side : c.side) {
+      for (const auto& v : side) {
+        sum += heightOf(v);
+        ++n;
+      }
+    }
+    if (n == 0) return false;
+    const float top = height.at(base).second;
+    return float(sum / double(n)) >= top - 0.25f * (top - floor_m);
+  }
+  bool unitStands(Label root, absl::flat_hash_map<Label, Label>& parent) const {
+    for (const auto& [l, h] : height) {
+      if (h.first <= floor_m + reach_m && findRoot(&parent, l) == root) return true;
+    }
+    return false;
+  }
+};
+
+StandingParts standingParts(const RoomStructure& room,
+                            const absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>>& voxels_of,
+                            float voxel) {
+  StandingParts s;
+  if (!room.up_found) return s;
+  const RoomPlane* floor = nullptr;
+  for (const RoomPlane& p : room.planes) {
+    if (p.kind == StructureKind::kFloor) floor = &p;
+  }
+  if (floor == nullptr) return s;
+  s.known = true;
+  s.up = room.up;
+  s.voxel = voxel;
+  s.floor_m = floor->offset_m * floor->normal.dot(room.up);
+  s.reach_m = floor->band_m + 2.0f * voxel;
+  s.across[0] = (std::abs(s.up.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY())
+                    .cross(s.up)
+                    .normalized();
+  s.across[1] = s.up.cross(s.across[0]);
+  for (const auto& [l, list] : voxels_of) {
+    float lo = 1e30f, hi = -1e30f;
+    Eigen::Vector2f sum = Eigen::Vector2f::Zero();
+    Eigen::AlignedBox2f box;
+    for (const auto& v : list) {
+      const float h = s.heightOf(v);
+      lo = std::min(lo, h);
+      hi = std::max(hi, h);
+      const Eigen::Vector3f p = (v.cast<float>() + Eigen::Vector3f::Constant(0.5f)) * voxel;
+      const Eigen::Vector2f q(p.dot(s.across[0]), p.dot(s.across[1]));
+      sum += q;
+      box.extend(q);
+    }
+    s.height[l] = {lo, hi};
+    s.voxels[l] = list.size();
+    s.centre2d[l] = list.empty() ? Eigen::Vector2f::Zero() : Eigen::Vector2f(sum / float(list.size()));
+    s.footprint[l] = box;
+  }
+  return s;
+}
+
+// Which labels are room structure (most of their voxels on a bounding face) and which voxels of
+// the others are cut from them (on a bounding face), from out->room; returns the labels with the
+// cut voxels cleared, or null when nothing is cut.
+std::unique_ptr<LabelBlocks> applyRoom(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
+                                       ObjectGroups* out) {
+  const int vps = layer.voxelsPerSide();
+  absl::flat_hash_map<Label, std::pair<int64_t, int64_t>> on;  // label → (barrier, all)
+  for (const auto& [index, block] : labels) {
+    for (int i = 0; i < int(block.size()); ++i) {
+      const Label l = block[size_t(i)];
+      if (l == 0) continue;
+      auto& count = on[l];
+      ++count.second;
+      const tsdf::VoxelIndex v =
+          index * vps + Eigen::Vector3i(i % vps, (i / vps) % vps, i / (vps * vps));
+      if (out->room.isBarrier(v)) ++count.first;
+    }
+  }
+  for (const auto& [l, count] : on) {
+    if (count.first > 0 && 2 * count.first >= count.second) out->structure.insert(l);
+  }
+  std::unique_ptr<LabelBlocks> cleared;
+  for (const auto& [key, unused] : out->room.barrier) {
+    const tsdf::VoxelIndex v = unpackGridKey(key);
+    const auto it = labels.find(layer.blockOfVoxel(v));
+    if (it == labels.end()) continue;
+    const Label l = it->second[layer.linearInBlock(v)];
+    if (l == 0 || out->structure.contains(l)) continue;
+    out->cut.insert(key);
+    if (cleared == nullptr) cleared = std::make_unique<LabelBlocks>(labels);
+    (*cleared)[it->first][layer.linearInBlock(v)] = 0;
+  }
+  return cleared;
+}
+
 }  // namespace
 
-ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
-                          const GsmParams& params) {
+ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& all_labels,
+                          const GsmParams& params, const Eigen::Vector3f& up_hint) {
   const int vps = layer.voxelsPerSide();
   const float voxel = layer.voxelSize();
+  ObjectGroups out;
+  out.room = findRoomStructure(layer, all_labels, params, up_hint);
+  const std::unique_ptr<LabelBlocks> cleared = applyRoom(layer, all_labels, &out);
+  const LabelBlocks& labels = cleared != nullptr ? *cleared : all_labels;
   const int r = std::clamp(1 + int(std::floor(params.object_gap_m / voxel + 1e-3f)), 1, vps);
   // The ball of radius r (without its centre): the voxels that touch a voxel.
   std::vector<Eigen::Vector3i> offsets;
@@ -421,14 +590,7 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       }
     }
   }
-  // Blocks in index order: the result must not depend on hash order.
-  std::vector<const LabelBlocks::value_type*> blocks;
-  blocks.reserve(labels.size());
-  for (const auto& entry : labels) blocks.push_back(&entry);
-  std::sort(blocks.begin(), blocks.end(), [](const auto* a, const auto* b) {
-    return std::tie(a->first.z(), a->first.y(), a->first.x()) <
-           std::tie(b->first.z(), b->first.y(), b->first.x());
-  });
+  const auto blocks = sortedBlocks(labels);
   // Pass 1: every label's voxels and shape.
   absl::flat_hash_map<Label, Shape> shapes;
   absl::flat_hash_map<Label, std::vector<tsdf::VoxelIndex>> voxels_of;
@@ -453,13 +615,19 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       list->push_back(v);
     }
   }
-  ObjectGroups out;
   absl::flat_hash_map<Label, Label> parent;
   for (auto& [l, s] : shapes) {
     parent[l] = l;
-    deriveShape(voxel, params.object_structure_extent_m, &s);
+    deriveShape(voxel, &s);
     if (s.planar) orientNormal(layer, voxels_of[l], &s);
-    if (s.structure) out.structure.insert(l);
+    // A single part larger than furniture can be is room structure whatever its shape (a bent
+    // strip of floor, a wall the segmenter kept whole with its skirting).
+    if (!out.structure.contains(l) &&
+        fullSpan(s, {&voxels_of[l]}, voxel) > params.object_max_extent_m) {
+      out.structure.insert(l);
+      ++out.giant_labels;
+    }
+    s.structure = out.structure.contains(l);
   }
   // Pass 2: contacts between labels that are not structure (structure never connects), each
   // side's voxels next to the other label listed once.
@@ -524,6 +692,8 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
     if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);
   };
   std::vector<std::pair<Label, Label>> supported;  // (resting, support), to be decided below
+  const StandingParts standing = standingParts(out.room, voxels_of, voxel);
+  std::vector<uint64_t> deferred;  // contacts decided once the standing units are known
   for (const uint64_t key : keys) {
     Contact& c = contacts[key];
     const Label a = Label(key >> 32), b = Label(key & 0xffffffffULL);
@@ -540,6 +710,26 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
       supported.push_back({b, a});
       continue;
     }
+    if (standing.known && !standing.carries(a, b, c)) {
+      deferred.push_back(key);
+      continue;
+    }
+    unite(a, b);
+  }
+  // Units that stand on the floor by themselves stay apart where they touch (a chair tucked
+  // under a table); a unit that does not stand (a chair's back, a cow's head) joins the one it
+  // touches most.
+  std::stable_sort(deferred.begin(), deferred.end(), [&](uint64_t x, uint64_t y) {
+    return contacts[x].pairs > contacts[y].pairs;
+  });
+  for (const uint64_t key : deferred) {
+    const Label a = Label(key >> 32), b = Label(key & 0xffffffffULL);
+    const Label ra = findRoot(&parent, a), rb = findRoot(&parent, b);
+    if (ra == rb) continue;
+    if (standing.unitStands(ra, parent) && standing.unitStands(rb, parent)) {
+      ++out.standing_cuts;
+      continue;
+    }
     unite(a, b);
   }
   // A cut holds only where what rests is smaller than its support: the object above it, as
@@ -549,6 +739,11 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
   for (const auto& [upper, support] : supported) {
     const Label ru = findRoot(&parent, upper), rs = findRoot(&parent, support);
     if (ru == rs) continue;
+    if (standing.known && !standing.under(upper, support) &&
+        standing.unitStands(ru, parent) && standing.unitStands(rs, parent)) {
+      ++out.standing_cuts;  // each stands on the floor beside the other: nothing rests on it
+      continue;
+    }
     const Shape& sb = shapes[support];
     std::vector<Label> resting;  // the labels of the resting object
     for (const auto& [l, unused] : shapes) {
@@ -577,6 +772,10 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
         grounded.insert(findRoot(&parent, upper));
       }
     }
+    // A part standing on the floor grounds its object, its own voxels on the floor cut or not.
+    for (const auto& [l, h] : standing.height) {
+      if (standing.stands(l) && !out.structure.contains(l)) grounded.insert(findRoot(&parent, l));
+    }
     return grounded;
   };
   if (params.object_shadow_gap_m > 0.0f) {
@@ -589,6 +788,31 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& label
   for (const auto& [l, s] : shapes) {
     Label root = findRoot(&parent, l);
     out.members[root].push_back(l);
+  }
+  // An object larger than furniture can be falls back to its parts: the grouping was not sure.
+  std::vector<Label> giants;
+  for (const auto& [id, members] : out.members) {
+    if (members.size() < 2) continue;
+    Shape whole;
+    std::vector<const std::vector<tsdf::VoxelIndex>*> lists;
+    for (const Label l : members) {
+      const Shape& part = shapes.at(l);
+      whole.n += part.n;
+      whole.sum += part.sum;
+      whole.outer += part.outer;
+      lists.push_back(&voxels_of.at(l));
+    }
+    deriveShape(voxel, &whole);
+    if (fullSpan(whole, lists, voxel) > params.object_max_extent_m) giants.push_back(id);
+  }
+  for (const Label id : giants) {
+    std::vector<Label> members = std::move(out.members.at(id));
+    out.members.erase(id);
+    for (const Label l : members) {
+      parent[l] = l;
+      out.members[l] = {l};
+    }
+    ++out.giant_fallbacks;
   }
   // The id is the smallest label (the roots already are: unions keep the smaller root).
   for (auto& [id, members] : out.members) {
@@ -620,3 +844,4 @@ Label ObjectGroups::partAt(const tsdf::VoxelIndex& v, Label label) const {
 }
 
 }  // namespace objdb::gsm
+

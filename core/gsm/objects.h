@@ -3,10 +3,18 @@
 // map are grouped into objects: two labels connect when their voxels touch (within
 // GsmParams::object_gap_m, at least object_min_contact_voxels voxels of the two next to the
 // other), unless
-//   - either is room structure: planar (the standard deviation along its thinnest principal axis
-//     at most a tenth of that along its middle one, or 1.5 voxels: a TSDF surface is two voxels
-//     thick) and at least object_structure_extent_m (√12 σ) along both in-plane axes (a floor, a
-//     wall); structure labels stay objects of their own;
+//   - either is room structure: most of its voxels lie on a bounding face of the room found in
+//     the whole map (room_structure.h: a floor, a wall, a ceiling, a cabinet front, a counter
+//     top), or it alone is larger than furniture can be (GsmParams::object_max_extent_m);
+//     structure labels stay objects of their own. The voxels of other labels that lie on a
+//     bounding face are cut from their objects (ObjectGroups::cut): a chair's label holding a
+//     strip of floor keeps the chair only;
+//   - both stand on the floor by themselves: with an up direction and a floor, a part whose
+//     lowest voxel lies in the floor's band stands (a leg), and carries a part it touches in the
+//     top quarter of its height (the seat it ends under); the units so joined stand when one of
+//     their parts does. Two standing units that touch elsewhere stay apart (a chair tucked under
+//     a table, its seat against the table's leg); a unit that does not stand (a chair's back, a
+//     cow's head) joins the one it touches most. Without a floor, every contact connects;
 //   - one rests on the other: the other is planar there (the whole label, or its surface within
 //     5 voxels of the contact: a table top under one label with its apron is flat where a mug
 //     stands), the first lies on its observed side (where the TSDF is positive), and the other's
@@ -17,7 +25,10 @@
 //     support's extent along both its axes: a mug on a table top, a box on a shelf or on a piece
 //     of floor, a picture on a door. A back standing along a seat's rear edge, legs under it, or
 //     a pedestal carrying a seat as wide as its base do not rest: they stay parts of the chair.
-// An object is a connected component of the rest; its id is its smallest label, so it is stable
+// An object is a connected component of the rest; one larger than furniture can be
+// (GsmParams::object_max_extent_m, full span along its principal axes) falls back to its parts,
+// each an object of its own (counted: ObjectGroups::giant_fallbacks). Its id is its smallest
+// label, so it is stable
 // while labels merge (the older label survives) and parts join it. The grouping is a function
 // of the map's main labels (the per-voxel label-count history decides them), recomputed from
 // them: merges and splits of objects lose nothing, the parts keep their labels.
@@ -52,11 +63,10 @@
 #include "absl/container/flat_hash_set.h"
 #include "core/common/params.h"
 #include "core/gsm/label_voxel.h"
+#include "core/gsm/room_structure.h"
 #include "core/tsdf/tsdf_layer.h"
 
 namespace objdb::gsm {
-
-using LabelBlocks = absl::flat_hash_map<tsdf::BlockIndex, std::vector<Label>, tsdf::BlockIndexHash>;
 
 // A structure voxel an object takes (see above), as part `part` of the object.
 struct AnnexedVoxel {
@@ -76,6 +86,15 @@ struct ObjectGroups {
   size_t supports = 0;  // of them, not connected because one rests on the other
   size_t shadow_joins = 0;  // label pairs connected across a shadow
   size_t islands = 0;       // pieces of structure taken by a floating object above them
+  // Objects larger than GsmParams::object_max_extent_m that fell back to their parts, and single
+  // labels that large made structure.
+  size_t standing_cuts = 0;  // touching units that each stand on the floor, kept apart
+  size_t giant_fallbacks = 0;
+  size_t giant_labels = 0;
+  // Voxels of object labels that lie on a bounding face of the room (packGridKey): cut from
+  // their objects (a chair's label holding a strip of floor).
+  absl::flat_hash_set<uint64_t> cut;
+  RoomStructure room;  // what room_structure.h found in the map
 
   // The part a map voxel with main label `label` counts as: the annexing object's part for an
   // annexed voxel, else `label` itself. The object is object_of of that.
@@ -84,7 +103,9 @@ struct ObjectGroups {
 
 // Groups the labels of `labels` (main label per voxel of each block, 0 = none; `layer` gives the
 // TSDF for the observed side of a surface). Every label present is in exactly one object.
+// `up_hint`: the cameras' mean image up (zero: unknown), for naming structure only.
 ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
-                          const GsmParams& params);
+                          const GsmParams& params,
+                          const Eigen::Vector3f& up_hint = Eigen::Vector3f::Zero());
 
 }  // namespace objdb::gsm

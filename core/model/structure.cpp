@@ -8,47 +8,10 @@
 
 #include "absl/container/flat_hash_set.h"
 #include "core/common/grid_key.h"
+#include "core/common/plane_spans.h"
 #include "core/model/features.h"
 
 namespace objdb::model {
-namespace {
-
-// 5th to 95th percentile spans of `inliers` along the two principal axes of their spread within
-// the plane with normal `n` (robust to a few stray points).
-template <typename PointAt>
-void planeSpans(size_t count, PointAt point_at, const Eigen::Vector3f& n, float spans[2]) {
-  spans[0] = spans[1] = 0.0f;
-  if (count < 3) return;
-  // In-plane basis, then the principal axes of the projected points.
-  const Eigen::Vector3f a =
-      (std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY()).cross(n).normalized();
-  const Eigen::Vector3f b = n.cross(a);
-  std::vector<Eigen::Vector2f> uv;
-  uv.reserve(count);
-  Eigen::Vector2f mean = Eigen::Vector2f::Zero();
-  for (size_t i = 0; i < count; ++i) {
-    const Eigen::Vector3f p = point_at(i);
-    uv.emplace_back(p.dot(a), p.dot(b));
-    mean += uv.back();
-  }
-  mean /= float(uv.size());
-  Eigen::Matrix2f cov = Eigen::Matrix2f::Zero();
-  for (const auto& q : uv) cov += (q - mean) * (q - mean).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2f> solver(cov);
-  for (int axis = 0; axis < 2; ++axis) {
-    const Eigen::Vector2f e = solver.eigenvectors().col(axis);
-    std::vector<float> t;
-    t.reserve(uv.size());
-    for (const auto& q : uv) t.push_back(q.dot(e));
-    std::sort(t.begin(), t.end());
-    const size_t lo = size_t(0.05 * double(t.size() - 1));
-    const size_t hi = size_t(std::ceil(0.95 * double(t.size() - 1)));
-    spans[axis] = t[hi] - t[lo];
-  }
-  if (spans[0] > spans[1]) std::swap(spans[0], spans[1]);  // smaller first
-}
-
-}  // namespace
 
 SurfaceClass classifySurface(const PointCloud& cloud, float depth_m, const ModelParams& params) {
   SurfaceClass out;

@@ -23,7 +23,10 @@ Frame renderFrame(const Scene& scene, const BuiltScene& built, const Renderer& r
   Frame frame;
   frame.index = index;
   frame.timestamp = double(index) / scene.trajectory.fps;
-  frame.T_world_camera = T_world_camera;
+  // The image is rendered from the true pose; the frame reports the pose a drifting tracker
+  // would (identical unless the scene has a drift), as poses.txt does for real recordings.
+  frame.T_world_camera =
+      driftedPose(scene.drift, T_world_camera, index, size_t(scene.trajectory.frames));
   frame.depth = std::move(out.depth);
   if (with_color) frame.color = std::move(out.color);
   frame.instances = std::move(out.instances);

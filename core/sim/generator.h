@@ -30,7 +30,9 @@ struct GenerateStats {
 // Called after each written frame with (frames done, frames total).
 using ProgressFn = std::function<void(size_t, size_t)>;
 
-// Renders frame `index` of a built scene (noise applied, deterministic for the scene's seed).
+// Renders frame `index` of a built scene from `T_world_camera` (noise applied, deterministic for
+// the scene's seed). The frame's T_world_camera is that pose with the scene's drift
+// (driftedPose; the same pose when the scene has none); depth and instances show the true view.
 Frame renderFrame(const Scene& scene, const BuiltScene& built, const Renderer& renderer,
                   const Transform& T_world_camera, size_t index, bool with_color,
                   NoiseStats* noise = nullptr);

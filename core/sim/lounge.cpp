@@ -2,28 +2,23 @@
 
 #include <cmath>
 
+#include "core/sim/object_library.h"
+
 namespace objdb::sim {
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kRoomX = 7.0, kRoomY = 5.0, kWallHeight = 2.5;
 
-struct Kind {
-  const char* name;
-  Rgb8 albedo;
-};
 // Albedo per kind (shared by instances of one kind, as identical objects are).
 Rgb8 albedoOf(const std::string& kind) {
-  static const std::vector<Kind> kinds = {
+  static const std::vector<KindAlbedo> kinds = {
       {"cow", {235, 230, 215}},          {"round_chair", {200, 70, 45}},
       {"cube_chair", {60, 110, 180}},    {"fire_extinguisher", {210, 30, 30}},
       {"gas_cylinder", {90, 140, 90}},   {"helmet", {240, 200, 40}},
       {"round_table", {150, 110, 70}},   {"square_table", {170, 140, 100}},
       {"large_box", {190, 150, 100}},    {"small_container", {80, 80, 90}},
       {"floor", {140, 140, 135}},        {"wall", {225, 220, 210}}};
-  for (const auto& k : kinds) {
-    if (kind == k.name) return k.albedo;
-  }
-  return {180, 180, 180};
+  return albedoIn(kinds, kind);
 }
 
 // One placement: instance id, kind, x, y, z (on a table top when > 0), yaw in degrees.
@@ -40,14 +35,7 @@ Transform at(double x, double y, double z) {
 }
 
 SceneObject object(int id, const std::string& kind, const Transform& T, bool structure = false) {
-  SceneObject o;
-  o.id = id;
-  o.category = kind;
-  o.mesh = kind;
-  o.albedo = albedoOf(kind);
-  o.T_world_object = T;
-  o.structure = structure;
-  return o;
+  return makeSceneObject(id, kind, T, albedoOf(kind), structure);
 }
 
 void addRoom(Scene* scene) {
@@ -119,7 +107,7 @@ Scene session(int index, const std::vector<Placement>& placements, const LoungeO
 }  // namespace
 
 const std::vector<std::string>& presetNames() {
-  static const std::vector<std::string> names = {"lounge", "two-boxes"};
+  static const std::vector<std::string> names = {"lounge", "kitchen", "two-boxes"};
   return names;
 }
 

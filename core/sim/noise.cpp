@@ -51,6 +51,9 @@ Status DepthNoiseParams::validate() const {
   if (!(std::isfinite(sigma_quadratic) && sigma_quadratic >= 0)) return bad("sigma_quadratic", sigma_quadratic);
   if (!std::isfinite(sigma_reference_m)) return bad("sigma_reference_m", sigma_reference_m);
   if (!(std::isfinite(quantum_m) && quantum_m >= 0 && quantum_m < 1)) return bad("quantum_m", quantum_m);
+  if (!(std::isfinite(disparity_quantum) && disparity_quantum >= 0 && disparity_quantum < 1)) {
+    return bad("disparity_quantum", disparity_quantum);
+  }
   if (!(std::isfinite(min_depth_m) && min_depth_m >= 0)) return bad("min_depth_m", min_depth_m);
   if (!(std::isfinite(max_depth_m) && max_depth_m > min_depth_m)) return bad("max_depth_m", max_depth_m);
   if (!(grazing_start_deg >= 0 && grazing_start_deg < grazing_full_deg && grazing_full_deg <= 90)) {
@@ -111,6 +114,11 @@ NoiseStats applyDepthNoise(const DepthNoiseParams& params, uint64_t frame_index,
         continue;
       }
       float noisy = z + params.sigmaAt(z) * float(normalFromKey(key, idx, kGaussA));
+      if (params.disparity_quantum > 0 && noisy > 0.0f) {
+        // Quantise 1/z (disparity), not z: the depth step grows as disparity_quantum · z².
+        const float steps = std::round(1.0f / (noisy * params.disparity_quantum));
+        noisy = steps > 0.0f ? 1.0f / (steps * params.disparity_quantum) : 0.0f;
+      }
       if (params.quantum_m > 0) noisy = std::round(noisy / params.quantum_m) * params.quantum_m;
       out = noisy > 0.0f ? noisy : 0.0f;
     }

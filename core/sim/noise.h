@@ -1,6 +1,7 @@
 // Depth-sensor noise for the synthetic world (Kinect/Tango-like, after Nguyen et al. 2012):
-// axial Gaussian noise σ(z) = σ₀ + σ₂·(z − z₀)², quantisation, a working range, dropouts at
-// grazing angles and at depth edges. Deterministic: every random draw is a hash of (seed, frame
+// axial Gaussian noise σ(z) = σ₀ + σ₂·(z − z₀)², quantisation (optionally in disparity, so the
+// step grows with z² as in a structured-light sensor), a working range, dropouts at grazing
+// angles and at depth edges. Deterministic: every random draw is a hash of (seed, frame
 // index, pixel, draw), so the same seed gives the same image whatever the thread count.
 #pragma once
 
@@ -17,6 +18,10 @@ struct DepthNoiseParams {
   float sigma_quadratic = 0.0019f;     // σ₂, metres per metre²
   float sigma_reference_m = 0.4f;      // z₀
   float quantum_m = 0.001f;            // depth step after noise (0 = none)
+  // Inverse-depth step in 1/m (0 = off): a structured-light sensor measures disparity ∝ 1/z in
+  // fixed sub-pixel steps, so its depth step is ≈ disparity_quantum · z² (Kinect: ≈ 0.0028,
+  // Khoshelham & Oude Elberink 2012). Applied after the noise, before quantum_m.
+  float disparity_quantum = 0.0f;
   float min_depth_m = 0.2f;            // closer → no measurement
   float max_depth_m = 6.0f;            // farther → no measurement
   float grazing_start_deg = 70.0f;     // dropout probability rises from 0 here ...
@@ -28,6 +33,8 @@ struct DepthNoiseParams {
     const float d = z - sigma_reference_m;
     return sigma_base_m + sigma_quadratic * d * d;
   }
+  // Depth step of the disparity quantisation at depth z (0 when it is off).
+  float disparityStepAt(float z) const { return disparity_quantum * z * z; }
 };
 
 // Counts of what the noise model did to one image.

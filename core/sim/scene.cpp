@@ -12,6 +12,19 @@
 #include "core/sim/object_library.h"
 
 namespace objdb::sim {
+
+SceneObject makeSceneObject(int id, const std::string& kind, const Transform& T_world_object,
+                            Rgb8 albedo, bool structure, std::vector<float> size) {
+  SceneObject o;
+  o.id = id;
+  o.category = kind;
+  o.mesh = kind;
+  o.albedo = albedo;
+  o.T_world_object = T_world_object;
+  o.structure = structure;
+  o.size = std::move(size);
+  return o;
+}
 namespace {
 
 using nlohmann::json;
@@ -82,8 +95,8 @@ Status parseNoise(const json& j, DepthNoiseParams* noise) {
   OBJDB_RETURN_IF_ERROR(checkKeys(
       j,
       {"enabled", "seed", "sigma_base_m", "sigma_quadratic", "sigma_reference_m", "quantum_m",
-       "min_depth_m", "max_depth_m", "grazing_start_deg", "grazing_full_deg", "edge_jump_m",
-       "edge_dropout_probability"},
+       "disparity_quantum", "min_depth_m", "max_depth_m", "grazing_start_deg", "grazing_full_deg",
+       "edge_jump_m", "edge_dropout_probability"},
       w));
   if (j.contains("enabled")) {
     if (!j["enabled"].is_boolean()) return fieldError(w + ".enabled", "expected true/false");
@@ -97,6 +110,7 @@ Status parseNoise(const json& j, DepthNoiseParams* noise) {
   OBJDB_RETURN_IF_ERROR(readNumber(j, "sigma_quadratic", w, &noise->sigma_quadratic));
   OBJDB_RETURN_IF_ERROR(readNumber(j, "sigma_reference_m", w, &noise->sigma_reference_m));
   OBJDB_RETURN_IF_ERROR(readNumber(j, "quantum_m", w, &noise->quantum_m));
+  OBJDB_RETURN_IF_ERROR(readNumber(j, "disparity_quantum", w, &noise->disparity_quantum));
   OBJDB_RETURN_IF_ERROR(readNumber(j, "min_depth_m", w, &noise->min_depth_m));
   OBJDB_RETURN_IF_ERROR(readNumber(j, "max_depth_m", w, &noise->max_depth_m));
   OBJDB_RETURN_IF_ERROR(readNumber(j, "grazing_start_deg", w, &noise->grazing_start_deg));
@@ -107,18 +121,36 @@ Status parseNoise(const json& j, DepthNoiseParams* noise) {
 }
 
 json noiseToJson(const DepthNoiseParams& n) {
-  return json{{"enabled", n.enabled},
-              {"seed", n.seed},
-              {"sigma_base_m", n.sigma_base_m},
-              {"sigma_quadratic", n.sigma_quadratic},
-              {"sigma_reference_m", n.sigma_reference_m},
-              {"quantum_m", n.quantum_m},
-              {"min_depth_m", n.min_depth_m},
-              {"max_depth_m", n.max_depth_m},
-              {"grazing_start_deg", n.grazing_start_deg},
-              {"grazing_full_deg", n.grazing_full_deg},
-              {"edge_jump_m", n.edge_jump_m},
-              {"edge_dropout_probability", n.edge_dropout_probability}};
+  json j{{"enabled", n.enabled},
+         {"seed", n.seed},
+         {"sigma_base_m", n.sigma_base_m},
+         {"sigma_quadratic", n.sigma_quadratic},
+         {"sigma_reference_m", n.sigma_reference_m},
+         {"quantum_m", n.quantum_m},
+         {"min_depth_m", n.min_depth_m},
+         {"max_depth_m", n.max_depth_m},
+         {"grazing_start_deg", n.grazing_start_deg},
+         {"grazing_full_deg", n.grazing_full_deg},
+         {"edge_jump_m", n.edge_jump_m},
+         {"edge_dropout_probability", n.edge_dropout_probability}};
+  // Written only when on, so scene files from before the field stay byte-identical.
+  if (n.disparity_quantum != 0.0f) j["disparity_quantum"] = n.disparity_quantum;
+  return j;
+}
+
+Status parseDrift(const json& j, PoseDrift* drift) {
+  const std::string w = "drift";
+  if (!j.is_object()) return fieldError(w, "expected an object");
+  OBJDB_RETURN_IF_ERROR(checkKeys(j, {"translation_m", "rotation_deg", "seed"}, w));
+  OBJDB_RETURN_IF_ERROR(readNumber(j, "translation_m", w, &drift->translation_m));
+  OBJDB_RETURN_IF_ERROR(readNumber(j, "rotation_deg", w, &drift->rotation_deg));
+  if (j.contains("seed")) {
+    if (!j["seed"].is_number_unsigned()) {
+      return fieldError(w + ".seed", "expected an unsigned integer");
+    }
+    drift->seed = j["seed"].get<uint64_t>();
+  }
+  return drift->validate();
 }
 
 StatusOr<SceneObject> parseObject(const json& j, size_t index) {
@@ -145,11 +177,15 @@ StatusOr<SceneObject> parseObject(const json& j, size_t index) {
   }
   if (j.contains("size")) {
     const json& s = j["size"];
-    if (!s.is_array() || s.size() != 2 || !s[0].is_number() || !s[1].is_number() ||
-        !(s[0].get<double>() > 0 && s[1].get<double>() > 0 && s[0].get<double>() < 1000 && s[1].get<double>() < 1000)) {
-      return fieldError(w + ".size", "expected two positive sizes in metres");
+    if (!s.is_array() || s.empty() || s.size() > 2) {
+      return fieldError(w + ".size", "expected one or two positive sizes in metres");
     }
-    o.size = {s[0].get<float>(), s[1].get<float>()};
+    for (const auto& v : s) {
+      if (!(v.is_number() && v.get<double>() > 0 && v.get<double>() < 1000)) {
+        return fieldError(w + ".size", "expected one or two positive sizes in metres");
+      }
+      o.size.push_back(v.get<float>());
+    }
   }
   if (j.contains("albedo")) {
     const json& a = j["albedo"];
@@ -189,6 +225,7 @@ Status Scene::validate() const {
         absl::StrFormat("scene depth_scale_m must be in (0, 0.01] (got %g)", depth_scale_m));
   }
   OBJDB_RETURN_IF_ERROR(noise.validate());
+  OBJDB_RETURN_IF_ERROR(drift.validate());
   std::set<int> ids;
   for (const auto& o : objects) {
     if (!ids.insert(o.id).second) {
@@ -219,7 +256,8 @@ StatusOr<Scene> parseSceneJson(absl::string_view text, const std::filesystem::pa
   }
   if (!root.is_object()) return fieldError("root", "expected a JSON object");
   OBJDB_RETURN_IF_ERROR(checkKeys(
-      root, {"name", "camera", "depth_scale_m", "noise", "objects", "trajectory"}, "root"));
+      root, {"name", "camera", "depth_scale_m", "noise", "drift", "objects", "trajectory"},
+      "root"));
   Scene scene;
   scene.base_dir = base_dir;
   if (root.contains("name")) {
@@ -256,6 +294,7 @@ StatusOr<Scene> parseSceneJson(absl::string_view text, const std::filesystem::pa
   }
   OBJDB_RETURN_IF_ERROR(readNumber(root, "depth_scale_m", "root", &scene.depth_scale_m));
   if (root.contains("noise")) OBJDB_RETURN_IF_ERROR(parseNoise(root["noise"], &scene.noise));
+  if (root.contains("drift")) OBJDB_RETURN_IF_ERROR(parseDrift(root["drift"], &scene.drift));
   if (root.contains("objects")) {
     if (!root["objects"].is_array()) return fieldError("objects", "expected an array");
     for (size_t i = 0; i < root["objects"].size(); ++i) {
@@ -318,6 +357,11 @@ std::string sceneToJson(const Scene& scene) {
   }
   root["depth_scale_m"] = scene.depth_scale_m;
   root["noise"] = noiseToJson(scene.noise);
+  if (scene.drift.enabled()) {  // absent when off: older scene files stay byte-identical
+    root["drift"] = json{{"translation_m", scene.drift.translation_m},
+                         {"rotation_deg", scene.drift.rotation_deg},
+                         {"seed", scene.drift.seed}};
+  }
   json objects = json::array();
   for (const auto& o : scene.objects) {
     json j{{"id", o.id},
@@ -393,6 +437,10 @@ StatusOr<BuiltScene> buildScene(const Scene& scene) {
         mesh = makeFloor(o.size[0], o.size[1]);
       } else if (o.mesh == "wall" && o.size.size() == 2) {
         mesh = makeWall(o.size[0], o.size[1]);
+      } else if (sizeArity(o.mesh) > 0 && !o.size.empty()) {
+        auto made = makeSizedLibraryObject(o.mesh, o.size);
+        if (!made.ok()) return annotate(made.status(), absl::StrCat("object ", o.id));
+        mesh = std::move(*made);
       } else {
         auto made = makeLibraryObject(o.mesh);
         if (!made.ok()) return annotate(made.status(), absl::StrCat("object ", o.id));

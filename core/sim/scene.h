@@ -3,8 +3,9 @@
 // trajectory. Read from / written to JSON scene files (docs/synthetic-world.md):
 //   {"name": "...", "camera": "tango" | {"width":..,"height":..,"fx":..,"fy":..,"cx":..,"cy":..},
 //    "depth_scale_m": 0.001, "noise": {"enabled": true, "seed": 1, ...},
+//    "drift": {"translation_m": 0.025, "rotation_deg": 0.4, "seed": 1},   (optional)
 //    "objects": [{"id": 1, "category": "cow", "mesh": "cow" | "file:meshes/x.obj",
-//                 "scale": [1,1,1], "size": [7,5], "albedo": [r,g,b], "structure": false,
+//                 "scale": [1,1,1], "size": [7,5] | [0.6], "albedo": [r,g,b], "structure": false,
 //                 "pose": {"t": [x,y,z], "yaw_deg": 30} | {"t": [...], "q": [qx,qy,qz,qw]}}],
 //    "trajectory": {"frames": 300, "fps": 30, "closed": false,
 //                   "keyframes": [{"position": [x,y,z], "look_at": [x,y,z]}, ...]}}
@@ -19,6 +20,7 @@
 #include "core/common/mesh.h"
 #include "core/common/transform.h"
 #include "core/sim/noise.h"
+#include "core/sim/pose_drift.h"
 #include "core/sim/renderer.h"
 
 namespace objdb::sim {
@@ -28,11 +30,17 @@ struct SceneObject {
   std::string category;           // object kind ("round_chair", "floor", "wall", ...)
   std::string mesh;               // library kind, or "file:<path>" (relative to the scene file)
   Eigen::Vector3f scale = Eigen::Vector3f::Ones();  // applied to the mesh in the object frame
-  std::vector<float> size;        // floor: {x, y}; wall: {length, height}; empty otherwise
+  std::vector<float> size;        // sized kinds (sizeArity()): floor {x, y}, wall {length,
+                                  // height}, base_cabinet {width}, ...; empty = default size
   Rgb8 albedo{180, 180, 180};
   Transform T_world_object = Transform::Identity();
-  bool structure = false;         // floor / walls: background for object-level evaluation
+  bool structure = false;         // floor, walls, built-in furniture: background for
+                                  // object-level evaluation
 };
+
+// An instance of the library kind `kind` (its category and its mesh).
+SceneObject makeSceneObject(int id, const std::string& kind, const Transform& T_world_object,
+                            Rgb8 albedo, bool structure = false, std::vector<float> size = {});
 
 struct Keyframe {
   Eigen::Vector3d position = Eigen::Vector3d::Zero();  // camera centre, world frame
@@ -52,6 +60,7 @@ struct Scene {
   Intrinsics intrinsics = Intrinsics::tango();
   double depth_scale_m = 0.001;   // metres per unit of the written 16-bit depth
   DepthNoiseParams noise;
+  PoseDrift drift;                // error of the written poses (default: none)
   std::vector<SceneObject> objects;
   TrajectorySpec trajectory;
   std::filesystem::path base_dir; // where "file:" meshes are resolved

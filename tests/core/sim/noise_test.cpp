@@ -1,6 +1,7 @@
 #include "core/sim/noise.h"
 
 #include <cmath>
+#include <set>
 
 #include <gtest/gtest.h>
 
@@ -46,6 +47,43 @@ TEST(DepthNoise, QuantisesToTheConfiguredStep) {
     const double steps = d / 0.004;
     ASSERT_NEAR(steps, std::round(steps), 1e-3) << d;
   }
+}
+
+TEST(DepthNoise, DisparityQuantisationStepGrowsWithDepthSquared) {
+  DepthNoiseParams p;
+  p.sigma_base_m = 0.0f;  // exact depth in, so only the quantisation acts
+  p.sigma_quadratic = 0.0f;
+  p.quantum_m = 0.0f;
+  p.edge_dropout_probability = 0.0f;
+  p.disparity_quantum = 0.0028f;
+  for (float z0 : {1.0f, 3.0f}) {
+    // A slow ramp ±0.1 m around z0: several quantisation levels, no depth edges.
+    const int w = 2000;
+    DepthImage depth(w, 1, 0.0f);
+    for (int u = 0; u < w; ++u) depth.at(u, 0) = z0 - 0.1f + 0.2f * float(u) / float(w - 1);
+    const DepthImage clean = depth;
+    applyDepthNoise(p, 0, Image<float>(w, 1, 1.0f), &depth);
+    std::set<float> levels;
+    for (int u = 0; u < w; ++u) {
+      const float z = clean.at(u, 0), d = depth.at(u, 0);
+      ASSERT_GT(d, 0.0f);
+      EXPECT_LE(std::abs(d - z), 0.55f * p.disparityStepAt(z)) << "z=" << z;
+      levels.insert(d);
+    }
+    ASSERT_GE(levels.size(), 3u) << "z0=" << z0;
+    float previous = -1.0f;
+    for (float level : levels) {
+      if (previous > 0.0f) {
+        const float expected = p.disparityStepAt(0.5f * (level + previous));
+        EXPECT_NEAR(level - previous, expected, 0.02f * expected) << "z0=" << z0;
+      }
+      previous = level;
+    }
+  }
+  EXPECT_NEAR(p.disparityStepAt(3.0f), 0.0252f, 1e-6f);  // Kinect-like: 2.5 cm steps at 3 m
+  p.disparity_quantum = -0.001f;
+  EXPECT_NE(p.validate().message().find("disparity_quantum"), absl::string_view::npos);
+  EXPECT_EQ(DepthNoiseParams().disparity_quantum, 0.0f);  // off unless a scene asks for it
 }
 
 TEST(DepthNoise, GrazingDropoutFollowsTheConfiguredRamp) {
