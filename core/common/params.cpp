@@ -81,6 +81,8 @@ Status GsmParams::validate() const {
       inRange(object_support_max_ratio, 0.0, 10.0, "gsm.object_support_max_ratio"));
   OBJDB_RETURN_IF_ERROR(inRange(object_annex_height_m, 0.0, 1.0, "gsm.object_annex_height_m"));
   OBJDB_RETURN_IF_ERROR(inRange(object_shadow_gap_m, 0.0, 2.0, "gsm.object_shadow_gap_m"));
+  OBJDB_RETURN_IF_ERROR(
+      inRange(structure_update_frames, 1, 1 << 20, "gsm.structure_update_frames"));
   return inRange(object_update_frames, 1, 1 << 20, "gsm.object_update_frames");
 }
 

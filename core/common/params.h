@@ -124,6 +124,10 @@ struct GsmParams {
   // on its own legs stays apart (SUN3D fragment 1 has one).
   float object_shadow_gap_m = 0.3f;
   int object_update_frames = 10;
+  // The room structure is found again every this many frames (and at a flush); the regroupings
+  // in between use the last one. The room changes slowly, and finding it reads the whole map
+  // (docs/structure.md, "What it costs").
+  int structure_update_frames = 50;
   Status validate() const;
 };
 

@@ -60,6 +60,7 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("object_annex_height_m", p.object_annex_height_m);
   fn("object_shadow_gap_m", p.object_shadow_gap_m);
   fn("object_update_frames", p.object_update_frames);
+  fn("structure_update_frames", p.structure_update_frames);
 }
 template <typename Fn>
 void forEachField(ModelParams& p, Fn&& fn) {

@@ -567,7 +567,17 @@ std::vector<RawSegment> Gsm::extractIdleLabels(bool flush) {
 std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
   if (flush || grouped_frame_ < 0 || frame_ - grouped_frame_ >= params_.object_update_frames) {
     grouped_frame_ = frame_;
-    groups_ = groupObjects();
+    // The room structure every structure_update_frames frames and at a flush; the regroupings
+    // between reuse the last one.
+    const bool fresh_room = flush || room_frame_ < 0 ||
+                            frame_ - room_frame_ >= params_.structure_update_frames;
+    RoomStructure room = std::move(groups_.room);
+    if (fresh_room) {
+      room_frame_ = frame_;
+      groups_ = groupObjects();
+    } else {
+      groups_ = gsm::groupObjects(layer_, mainLabelBlocks(), params_, upHint(), &room);
+    }
     logger("gsm")->debug("frame {}: room structure: {}; {} giant objects fell back to parts, {} "
                          "standing units kept apart",
                          frame_, groups_.room.summary(), groups_.giant_fallbacks,

@@ -185,6 +185,7 @@ class Gsm {
   absl::flat_hash_map<Label, ExtractedObject> extracted_objects_;
   int64_t grouped_frame_ = -1;  // the frame objects were last regrouped at
   ObjectGroups groups_;  // object id → parts (and annexed structure voxels), as then
+  int64_t room_frame_ = -1;  // the frame the room structure in groups_ was found at
   Label next_label_ = 1;
   int64_t frame_ = 0;
   std::vector<Eigen::Vector3f> camera_positions_;  // world, one per integrated frame

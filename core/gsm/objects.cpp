@@ -572,11 +572,12 @@ std::unique_ptr<LabelBlocks> applyRoom(const tsdf::TsdfLayer& layer, const Label
 }  // namespace
 
 ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& all_labels,
-                          const GsmParams& params, const Eigen::Vector3f& up_hint) {
+                          const GsmParams& params, const Eigen::Vector3f& up_hint,
+                          const RoomStructure* room) {
   const int vps = layer.voxelsPerSide();
   const float voxel = layer.voxelSize();
   ObjectGroups out;
-  out.room = findRoomStructure(layer, all_labels, params, up_hint);
+  out.room = room != nullptr ? *room : findRoomStructure(layer, all_labels, params, up_hint);
   const std::unique_ptr<LabelBlocks> cleared = applyRoom(layer, all_labels, &out);
   const LabelBlocks& labels = cleared != nullptr ? *cleared : all_labels;
   const int r = std::clamp(1 + int(std::floor(params.object_gap_m / voxel + 1e-3f)), 1, vps);

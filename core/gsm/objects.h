@@ -103,9 +103,11 @@ struct ObjectGroups {
 
 // Groups the labels of `labels` (main label per voxel of each block, 0 = none; `layer` gives the
 // TSDF for the observed side of a surface). Every label present is in exactly one object.
-// `up_hint`: the cameras' mean image up (zero: unknown), for naming structure only.
+// `up_hint`: the cameras' mean image up (zero: unknown), for naming structure only. `room`: the
+// room structure found before (null: found now from the map, findRoomStructure).
 ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& labels,
                           const GsmParams& params,
-                          const Eigen::Vector3f& up_hint = Eigen::Vector3f::Zero());
+                          const Eigen::Vector3f& up_hint = Eigen::Vector3f::Zero(),
+                          const RoomStructure* room = nullptr);
 
 }  // namespace objdb::gsm
