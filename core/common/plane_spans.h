@@ -16,6 +16,14 @@
 
 namespace objdb {
 
+// Two unit axes spanning the plane with unit normal `n` (a, b, n right-handed).
+inline void inPlaneBasis(const Eigen::Vector3f& n, Eigen::Vector3f* a, Eigen::Vector3f* b) {
+  *a = (std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY())
+           .cross(n)
+           .normalized();
+  *b = n.cross(*a);
+}
+
 // `point_at(i)` (i < count) gives the i-th point; `n` is the plane's unit normal. Writes the
 // spans, smaller first (0 for fewer than 3 points).
 template <typename PointAt>
@@ -23,9 +31,8 @@ void planeSpans(size_t count, PointAt point_at, const Eigen::Vector3f& n, float 
   spans[0] = spans[1] = 0.0f;
   if (count < 3) return;
   // In-plane basis, then the principal axes of the projected points.
-  const Eigen::Vector3f a =
-      (std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY()).cross(n).normalized();
-  const Eigen::Vector3f b = n.cross(a);
+  Eigen::Vector3f a, b;
+  inPlaneBasis(n, &a, &b);
   std::vector<Eigen::Vector2f> uv;
   uv.reserve(count);
   Eigen::Vector2f mean = Eigen::Vector2f::Zero();

@@ -10,6 +10,7 @@
 #include <Eigen/Geometry>
 
 #include "core/common/grid_key.h"
+#include "core/common/plane_spans.h"
 
 namespace objdb::gsm {
 namespace {
@@ -509,10 +510,7 @@ StandingParts standingParts(const RoomStructure& room,
   s.voxel = voxel;
   s.floor_m = floor->offset_m * floor->normal.dot(room.up);
   s.reach_m = floor->band_m + 2.0f * voxel;
-  s.across[0] = (std::abs(s.up.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY())
-                    .cross(s.up)
-                    .normalized();
-  s.across[1] = s.up.cross(s.across[0]);
+  inPlaneBasis(s.up, &s.across[0], &s.across[1]);
   for (const auto& [l, list] : voxels_of) {
     float lo = 1e30f, hi = -1e30f;
     Eigen::Vector2f sum = Eigen::Vector2f::Zero();

@@ -201,13 +201,6 @@ std::vector<Candidate> planesOf(int direction, const Eigen::Vector3f& d,
   return out;
 }
 
-void basisOf(const Eigen::Vector3f& n, Eigen::Vector3f* a, Eigen::Vector3f* b) {
-  *a = (std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY())
-           .cross(n)
-           .normalized();
-  *b = n.cross(*a);
-}
-
 // Joins parallel planes of one direction whose bands touch (within a voxel): two sheets of one
 // wall seen from drifted poses, a rug on the floor, coplanar pieces of one counter. Faces are
 // found after this, so two table tops at one height stay two faces.
@@ -250,9 +243,17 @@ struct PlaneFaces {
   std::vector<uint8_t> interior; // per cell: well inside its face (the behind test's footprint)
   std::vector<Face> faces;
   // The cell of a point (−1: outside the grid).
-  long cellOf(const Eigen::Vector3f& p) const {
-    const int i = int(std::floor(p.dot(a) / cell)) - i0, j = int(std::floor(p.dot(b) / cell)) - j0;
+  // The grid column and row of a point (may lie outside the grid).
+  Eigen::Vector2i cellIndex(const Eigen::Vector3f& p) const {
+    return {int(std::floor(p.dot(a) / cell)) - i0, int(std::floor(p.dot(b) / cell)) - j0};
+  }
+  // The cell at column i, row j (−1: outside the grid).
+  long cellAt(int i, int j) const {
     return (i < 0 || j < 0 || i >= w || j >= h) ? -1 : long(j) * w + i;
+  }
+  long cellOf(const Eigen::Vector3f& p) const {
+    const Eigen::Vector2i c = cellIndex(p);
+    return cellAt(c.x(), c.y());
   }
 };
 
@@ -261,7 +262,7 @@ constexpr long kMaxGridCells = 1L << 22;
 PlaneFaces facesOf(const Candidate& plane, const Eigen::Vector3f& n,
                    const std::vector<Surfel>& surfels, float voxel) {
   PlaneFaces out;
-  basisOf(n, &out.a, &out.b);
+  inPlaneBasis(n, &out.a, &out.b);
   float lo[2] = {1e30f, 1e30f}, hi[2] = {-1e30f, -1e30f};
   for (const uint32_t m : plane.members) {
     const float u = surfels[m].p.dot(out.a), v = surfels[m].p.dot(out.b);
@@ -310,9 +311,8 @@ PlaneFaces facesOf(const Candidate& plane, const Eigen::Vector3f& n,
       const int ci = int(c % out.w), cj = int(c / out.w);
       for (int dj = -2; dj <= 2; ++dj) {  // across one-cell holes (sensor dropouts)
         for (int di = -2; di <= 2; ++di) {
-          const int i = ci + di, j = cj + dj;
-          if (i < 0 || j < 0 || i >= out.w || j >= out.h) continue;
-          const long q = long(j) * out.w + i;
+          const long q = out.cellAt(ci + di, cj + dj);
+          if (q < 0) continue;
           if (count[size_t(q) + 1] == count[size_t(q)] || out.face[size_t(q)] >= 0) continue;
           out.face[size_t(q)] = id;
           stack.push_back(q);
@@ -334,9 +334,8 @@ PlaneFaces facesOf(const Candidate& plane, const Eigen::Vector3f& n,
       int around = 0;
       for (int dj = -2; dj <= 2; ++dj) {
         for (int di = -2; di <= 2; ++di) {
-          const int i = ci + di, j = cj + dj;
-          if (i < 0 || j < 0 || i >= out.w || j >= out.h) continue;
-          around += out.face[size_t(long(j) * out.w + i)] == int(f) ? 1 : 0;
+          const long q = out.cellAt(ci + di, cj + dj);
+          around += (q >= 0 && out.face[size_t(q)] == int(f)) ? 1 : 0;
         }
       }
       if (around >= 20) {
@@ -556,16 +555,17 @@ RoomStructure findRoomStructure(const tsdf::TsdfLayer& layer, const LabelBlocks&
     const Candidate& c = candidates[p];
     const Eigen::Vector3f n = dirs[size_t(c.direction)];
     const PlaneFaces& grid = faces[p];
-    const auto bounding = [&](long i, long j) {
-      if (i < 0 || j < 0 || i >= grid.w || j >= grid.h) return false;
-      const int32_t f = grid.face[size_t(j * grid.w + i)];
+    const auto bounding = [&](int i, int j) {
+      const long cell = grid.cellAt(i, j);
+      if (cell < 0) return false;
+      const int32_t f = grid.face[size_t(cell)];
       return f >= 0 && is_bounding[p][size_t(f)] != 0;
     };
     for (const Surfel& s : surfels) {
       const float o = n.dot(s.p);
       if (o < c.lo || o > c.hi) continue;
-      const long i = long(std::floor(s.p.dot(grid.a) / grid.cell)) - grid.i0;
-      const long j = long(std::floor(s.p.dot(grid.b) / grid.cell)) - grid.j0;
+      const Eigen::Vector2i ij = grid.cellIndex(s.p);
+      const int i = ij.x(), j = ij.y();
       if (!bounding(i, j) && !bounding(i - 1, j) && !bounding(i + 1, j) && !bounding(i, j - 1) &&
           !bounding(i, j + 1)) {
         continue;
