@@ -23,13 +23,14 @@ size_t places(const Row& row) {
 size_t depthAgreeingPoints(const std::vector<Eigen::Vector3f>& points,
                            const Transform& T_camera_object, const Frame& frame,
                            const Intrinsics& k, cv::Mat* draw, const cv::Scalar& colour,
-                           std::map<int, size_t>* votes) {
+                           std::map<int, size_t>* votes, std::vector<PointVote>* point_votes) {
   const Eigen::Isometry3f T = T_camera_object.cast<float>();
   size_t n = 0;
   const float sx = draw ? float(draw->cols) / float(k.width) : 1.0f;
   const float sy = draw ? float(draw->rows) / float(k.height) : 1.0f;
-  for (const auto& p : points) {
-    const Eigen::Vector3f c = T * p;
+  if (point_votes != nullptr) point_votes->resize(points.size());
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3f c = T * points[i];
     if (!(c.z() > 0.05f)) continue;
     const int u = int(std::lround(k.fx * c.x() / c.z() + k.cx));
     const int v = int(std::lround(k.fy * c.y() / c.z() + k.cy));
@@ -38,6 +39,9 @@ size_t depthAgreeingPoints(const std::vector<Eigen::Vector3f>& points,
     if (!(d > 0.0f) || std::abs(d - c.z()) > std::max(0.03f, 0.02f * c.z())) continue;
     ++n;
     if (votes != nullptr && frame.instances) ++(*votes)[int(frame.instances->at(u, v))];
+    if (point_votes != nullptr && frame.instances) {
+      (*point_votes)[i].add(int(frame.instances->at(u, v)));
+    }
     if (draw != nullptr) {
       cv::circle(*draw, cv::Point(int(float(u) * sx), int(float(v) * sy)), 1, colour, -1);
     }
@@ -94,7 +98,8 @@ Status scanFrames(const std::map<std::string, std::string>& datasets, size_t eve
         for (Placement& p : row.placements) {
           if (p.session != session) continue;
           const size_t n = depthAgreeingPoints(row.points, T_camera_world * p.T_world_object,
-                                               frame, ds->intrinsics(), nullptr, {}, &p.votes);
+                                               frame, ds->intrinsics(), nullptr, {}, &p.votes,
+                                               &p.point_votes);
           if (n > p.best_hits) {
             p.best_hits = n;
             p.best_frame = f;

@@ -25,12 +25,26 @@ namespace objdb::cli {
 
 inline constexpr size_t kMaxScanPoints = 3000;  // model points projected per placement
 
+// The instance a model point fell on most often over the frames (a running majority vote,
+// Boyer–Moore: exact when one instance holds more than half of its votes; 0 = background).
+struct PointVote {
+  int instance = 0;
+  int lead = 0;  // votes for `instance` beyond the others (0: no vote yet, or a tie)
+  bool voted = false;
+  void add(int id) {
+    voted = true;
+    if (lead == 0) instance = id;
+    lead += id == instance ? 1 : -1;
+  }
+};
+
 struct Placement {
   std::string session;
   Transform T_world_object;
   size_t best_frame = 0;
   size_t best_hits = 0;
   std::map<int, size_t> votes;  // ground-truth instance id → points on it, over all frames
+  std::vector<PointVote> point_votes;  // per model point (Row::points), where frames have truth
 };
 
 struct Row {
@@ -48,12 +62,14 @@ size_t places(const Row& row);
 
 // Points of `points` (model frame) placed by T_camera_object that land on a pixel of `frame`
 // whose depth agrees (within max(3 cm, 2 % of the depth)); with `draw`, those points are drawn
-// onto it in `colour`; with `votes`, the ground-truth instance under each is counted.
+// onto it in `colour`; with `votes`, the ground-truth instance under each is counted, and with
+// `point_votes` (aligned with `points`) each point's own vote is added.
 size_t depthAgreeingPoints(const std::vector<Eigen::Vector3f>& points,
                            const Transform& T_camera_object, const Frame& frame,
                            const Intrinsics& k, cv::Mat* draw = nullptr,
                            const cv::Scalar& colour = {},
-                           std::map<int, size_t>* votes = nullptr);
+                           std::map<int, size_t>* votes = nullptr,
+                           std::vector<PointVote>* point_votes = nullptr);
 
 // The active models with at least `min_placements` placements, most placements first, at most
 // `max_rows`, with their sampled clouds and merge records.

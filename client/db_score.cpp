@@ -15,7 +15,8 @@
 
 namespace objdb::cli {
 
-StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets) {
+StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets,
+                                      const std::set<int>& structure_ids) {
   GroundTruth objects;
   for (const auto& [session, folder] : datasets) {
     OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<io::Dataset> ds, io::openDataset(folder));
@@ -33,7 +34,7 @@ StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& 
       continue;
     }
     // Class labels without objects.json (label-fusion's labels/): every id is one object of kind
-    // "label <id>"; nothing is structure.
+    // "label <id>"; those of structure_ids are structure.
     std::set<int> ids;
     for (size_t f = 0; f < ds->size(); ++f) {
       OBJDB_ASSIGN_OR_RETURN(const Frame frame, ds->loadFrame(f));
@@ -49,11 +50,131 @@ StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& 
       io::GroundTruthObject g;
       g.id = id;
       g.category = absl::StrFormat("label %d", id);
+      g.is_structure = structure_ids.count(id) != 0;
       objects[session][id] = g;
     }
   }
   return objects;
 }
+
+namespace {
+
+// The true object of instance `id` in `session` (null: background or unknown).
+const io::GroundTruthObject* trueObject(const GroundTruth& truth, const std::string& session,
+                                        int id) {
+  const auto s = truth.find(session);
+  if (s == truth.end() || id == 0) return nullptr;
+  const auto o = s->second.find(id);
+  return o == s->second.end() ? nullptr : &o->second;
+}
+
+// TruthScore's purity, leakage and excess extent (see db_score.h).
+void scorePurity(const std::vector<Row>& rows, const GroundTruth& truth, TruthScore* s) {
+  constexpr double kImpurePlacement = 0.8, kImpureModel = 0.95;
+  constexpr double kExcess = 0.05;  // m: "within a few cm of its true object's"
+  constexpr size_t kMinOnObject = 10;  // points, for a span
+  double placement_sum = 0.0, model_sum = 0.0, excess_sum = 0.0;
+  size_t object_votes = 0, structure_votes = 0;
+  std::vector<std::pair<double, std::string>> junk, impure;
+  s->model_purity_min = 1.0;
+  for (const Row& row : rows) {
+    if (row.summary.structure) continue;
+    // The model's kind: the true object kind most of its points fell on, pooled over placements.
+    std::map<std::string, size_t> by_kind, everything;  // object kinds; all, structure too
+    size_t total = 0, on_structure = 0;
+    for (const Placement& p : row.placements) {
+      for (const auto& [id, n] : p.votes) {
+        total += n;
+        const io::GroundTruthObject* g = trueObject(truth, p.session, id);
+        everything[g == nullptr ? std::string("nothing") : g->category] += n;
+        if (g == nullptr) continue;
+        if (g->is_structure) {
+          on_structure += n;
+        } else {
+          by_kind[g->category] += n;
+        }
+      }
+    }
+    if (by_kind.empty() || total == 0) continue;
+    const auto best = std::max_element(by_kind.begin(), by_kind.end(), [](const auto& a,
+                                                                          const auto& b) {
+      return a.second < b.second;
+    });
+    if (best->second < on_structure) continue;  // mostly floor or wall: scored as structure
+    const std::string& kind = best->first;
+    const double purity = double(best->second) / double(total);
+    ++s->pure_models;
+    model_sum += purity;
+    s->model_purity_min = std::min(s->model_purity_min, purity);
+    if (purity < kImpureModel) {
+      ++s->impure_models;
+      // What else it holds, most first.
+      std::vector<std::pair<size_t, std::string>> others;
+      for (const auto& [k, n] : everything) {
+        if (k != kind) others.emplace_back(n, k);
+      }
+      std::sort(others.rbegin(), others.rend());
+      std::string holds;
+      for (size_t i = 0; i < others.size() && i < 3; ++i) {
+        holds += absl::StrFormat("%s%s %.0f %%", i ? ", " : "", others[i].second,
+                                 100.0 * double(others[i].first) / double(total));
+      }
+      impure.emplace_back(purity, absl::StrFormat("model %d (%s, %d placement(s)): purity %.0f %%; "
+                                                  "also %s",
+                                                  row.summary.id, kind, row.placements.size(),
+                                                  100.0 * purity, holds));
+    }
+    object_votes += total;
+    structure_votes += on_structure;
+    for (const Placement& p : row.placements) {
+      double share = 0.0;
+      const int id = truthOf(p, &share);
+      const io::GroundTruthObject* g = trueObject(truth, p.session, id);
+      if (g == nullptr || g->is_structure || share <= 0.0) continue;
+      ++s->pure_placements;
+      placement_sum += share;
+      s->impure_placements += share < kImpurePlacement ? 1 : 0;
+    }
+    // Its points on its kind in any placement, against all of them.
+    std::vector<Eigen::Vector3f> on_object;
+    for (size_t i = 0; i < row.points.size(); ++i) {
+      for (const Placement& p : row.placements) {
+        if (i >= p.point_votes.size() || !p.point_votes[i].voted) continue;
+        const io::GroundTruthObject* g =
+            trueObject(truth, p.session, p.point_votes[i].instance);
+        if (g != nullptr && !g->is_structure && g->category == kind) {
+          on_object.push_back(row.points[i]);
+          break;
+        }
+      }
+    }
+    if (on_object.size() < kMinOnObject) continue;
+    const double all = principalSpans(row.points)(0), own = principalSpans(on_object)(0);
+    const double excess = std::max(0.0, all - own);
+    ++s->extent_models;
+    excess_sum += excess;
+    s->extent_excess_max = std::max(s->extent_excess_max, excess);
+    s->extent_over += excess > kExcess ? 1 : 0;
+    junk.emplace_back(excess, absl::StrFormat(
+                                  "model %d (%s, %d placement(s)): %.2f m across, its %s points "
+                                  "%.2f m; purity %.0f %%",
+                                  row.summary.id, kind, row.placements.size(), all, kind, own,
+                                  100.0 * purity));
+  }
+  s->placement_purity = s->pure_placements ? placement_sum / double(s->pure_placements) : 0.0;
+  s->model_purity = s->pure_models ? model_sum / double(s->pure_models) : 0.0;
+  if (s->pure_models == 0) s->model_purity_min = 0.0;
+  s->extent_excess = s->extent_models ? excess_sum / double(s->extent_models) : 0.0;
+  s->leakage = object_votes ? double(structure_votes) / double(object_votes) : 0.0;
+  std::sort(junk.begin(), junk.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  for (size_t i = 0; i < junk.size() && i < 5; ++i) {
+    if (junk[i].first > kExcess) s->junk.push_back(junk[i].second);
+  }
+  std::sort(impure.begin(), impure.end());
+  for (size_t i = 0; i < impure.size() && i < 5; ++i) s->impure.push_back(impure[i].second);
+}
+
+}  // namespace
 
 TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
   TruthScore s;
@@ -142,6 +263,7 @@ TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
       }
     }
   }
+  scorePurity(rows, truth, &s);
   // Ids are per session: an object seen in three sessions counts three times.
   for (const auto& [kind, ids] : objects_of_kind) {
     size_t models = 0;
@@ -177,6 +299,24 @@ void printTruthScore(const TruthScore& s) {
                        : absl::StrFormat("%.0f %% (%d of %d)",
                                          100.0 * double(s.with_kind) / double(s.repeated),
                                          s.with_kind, s.repeated));
+  line("purity of object placements (mean; under 80 %)",
+       s.pure_placements == 0 ? std::string("-")
+                              : absl::StrFormat("%.0f %% (%d of %d)", 100.0 * s.placement_purity,
+                                                s.impure_placements, s.pure_placements));
+  line("purity of object models (mean, least; under 95 %)",
+       s.pure_models == 0 ? std::string("-")
+                          : absl::StrFormat("%.0f %%, %.0f %% (%d of %d)", 100.0 * s.model_purity,
+                                            100.0 * s.model_purity_min, s.impure_models,
+                                            s.pure_models));
+  for (const auto& i : s.impure) std::printf("  %s\n", i.c_str());
+  line("structure leakage (object models' points on floor, walls)",
+       s.pure_models == 0 ? std::string("-") : absl::StrFormat("%.1f %%", 100.0 * s.leakage));
+  line("excess extent of object models (mean, most; over 5 cm)",
+       s.extent_models == 0 ? std::string("-")
+                            : absl::StrFormat("%.2f m, %.2f m (%d of %d)", s.extent_excess,
+                                              s.extent_excess_max, s.extent_over,
+                                              s.extent_models));
+  for (const auto& j : s.junk) std::printf("  %s\n", j.c_str());
   // models: how many models the kind ends in over all sessions (the target: at most 2 for a
   // chair kind); models/object: how many models hold each object's segments, on average.
   std::printf("\n%-22s %8s %10s %8s %14s\n", "kind", "objects", "segments", "models",

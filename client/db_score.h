@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -22,8 +23,10 @@ using GroundTruth = std::map<std::string, std::map<int, io::GroundTruthObject>>;
 // The objects.json of every dataset; FAILED_PRECONDITION naming the folder when one has no
 // instances (instances/, or a TUM sequence's labels/), objects.json's own errors when it is
 // malformed. Without an objects.json every id seen in the frames is one object of kind
-// "label <id>" (class labels, as label-fusion's labels/ hold them).
-StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets);
+// "label <id>" (class labels, as label-fusion's labels/ hold them); those of `structure_ids`
+// (e.g. NYU40's wall 1, floor 2, ceiling 22) are structure.
+StatusOr<GroundTruth> readGroundTruth(const std::map<std::string, std::string>& datasets,
+                                      const std::set<int>& structure_ids = {});
 
 struct TruthScore {
   size_t placements = 0;          // raw segments in the database
@@ -40,6 +43,22 @@ struct TruthScore {
   // another of their kind at another place (the paper's recall).
   size_t repeated = 0, with_kind = 0;
   std::vector<std::string> findings;  // one line per erroneous or structure merge
+  // Purity and junk, over the placements and models not flagged structure whose points fall on
+  // a true object (not structure) most:
+  //  - a placement's purity: the share of its depth-agreeing points on that instance;
+  //  - a model's purity: over its placements pooled, the share on instances of its kind;
+  //  - structure leakage: the share of their points on true structure (floor, walls);
+  //  - a model's excess extent: its largest principal span less that of its points whose own
+  //    majority instance is of its kind (floor flakes and a neighbour's pieces spread it).
+  size_t pure_placements = 0, impure_placements = 0;  // with purity measured; of them < 80 %
+  double placement_purity = 0.0;                      // mean
+  size_t pure_models = 0, impure_models = 0;          // with purity measured; of them < 95 %
+  double model_purity = 0.0, model_purity_min = 0.0;  // mean and least
+  double leakage = 0.0;
+  size_t extent_models = 0, extent_over = 0;  // models measured; of them with excess > 5 cm
+  double extent_excess = 0.0, extent_excess_max = 0.0;  // metres, mean and most
+  std::vector<std::string> junk;    // the models with the most excess extent, worst first
+  std::vector<std::string> impure;  // the least pure models (under 95 %) and what else they hold
   struct Kind {
     std::string kind;
     size_t objects = 0, segments = 0;

@@ -12,10 +12,12 @@
 #include <map>
 #include <memory>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
 #include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/db_scan.h"
@@ -56,6 +58,10 @@ gives each), then scores the database:
   --config FILE.json  the server's pipeline parameters (objdb-server --config)
   --db FILE           keep the database in FILE (must not exist); default: a temporary file
   --every N           stream every N-th frame (default 1)
+  --structure-ids L   with class labels and no objects.json (labels/ of class ids): the ids that
+                      are structure, comma-separated (e.g. NYU40: 1,2,22 for wall, floor,
+                      ceiling); the purity and structure leakage count points on them as floor
+                      and walls (default: none)
   --scan-every N      look for placements in every N-th frame when scoring (default 1)
   -h, --help          show this text
 
@@ -66,6 +72,7 @@ struct Options {
   std::vector<std::string> datasets;
   std::string config, db;
   long long every = 1, scan_every = 1;
+  std::set<int> structure_ids;
 };
 
 int parse(int argc, char** argv, Options* o) {
@@ -85,6 +92,18 @@ int parse(int argc, char** argv, Options* o) {
       o->config = value;
     } else if (a == "--db") {
       o->db = value;
+    } else if (a == "--structure-ids") {
+      const std::vector<std::string> ids = absl::StrSplit(value, ',');
+      for (const std::string& id : ids) {
+        long long n = 0;
+        if (!cli::parseInt(id.c_str(), 1, 65535, &n)) {
+          return cli::usageError(kCommand,
+                                 "--structure-ids needs class ids 1-65535 separated by commas, "
+                                 "got " + std::string(value),
+                                 kUsage);
+        }
+        o->structure_ids.insert(int(n));
+      }
     } else if (a == "--every" || a == "--scan-every") {
       if (!cli::parseInt(value, 1, 1000000, a == "--every" ? &o->every : &o->scan_every)) {
         return cli::usageError(kCommand, a + " needs a positive integer, got " + value, kUsage);
@@ -150,7 +169,7 @@ int runEvalCommand(int argc, char** argv) {
   }
   cli::GroundTruth truth;
   if (with_truth) {
-    auto read = cli::readGroundTruth(folders);
+    auto read = cli::readGroundTruth(folders, o.structure_ids);
     if (!read.ok()) return cli::reportError(kCommand, read.status());
     truth = *std::move(read);
   }

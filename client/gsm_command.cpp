@@ -127,6 +127,12 @@ int runGsmCommand(int argc, char** argv) {
               "larger than furniture fell back to their parts\n",
               objects, groups.object_of.size(), groups.structure.size(), groups.giant_labels,
               groups.cut.size(), groups.standing_cuts, groups.giant_fallbacks);
+  if (params.gsm.objects) {
+    const gsm::ExtractionCounts& c = map->extractionCounts();
+    std::printf("extractions: %zu objects for the first time, %zu again; %zu updated but "
+                "unchanged (kept), %zu held back as flicker, %zu withdrawn\n",
+                c.first, c.again, c.unchanged, c.unconfirmed, c.withdrawn);
+  }
   return rejected == 0 ? 0 : 1;
 }
 

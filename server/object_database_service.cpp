@@ -505,6 +505,7 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
     session.flush_jobs.pop_front();
   }
   const int64_t frames = int64_t(session.snapshot().frames_integrated());
+  const gsm::ExtractionCounts counts = session.map->extractionCounts();
   OBJDB_RETURN_IF_ERROR(store_->finishSession(session.name, storage::SessionState::kEnded, frames));
   {
     std::lock_guard lock(session.mutex);
@@ -519,8 +520,12 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
     session.scene.reset();
   }
   session.frame_indices = {};
-  logger("server")->info("session {} ended: {} frames, {} segments flushed at the end",
-                         session.name, frames, flushed);
+  logger("server")->info(
+      "session {} ended: {} frames, {} segments flushed at the end; objects extracted {} times "
+      "for the first time, {} again, {} updated but unchanged (kept), {} held back as flicker, {} "
+      "withdrawn",
+      session.name, frames, flushed, counts.first, counts.again, counts.unchanged,
+      counts.unconfirmed, counts.withdrawn);
   releaseLease(session.name);
   forgetEndedSessions();
   return absl::OkStatus();

@@ -83,6 +83,8 @@ Status GsmParams::validate() const {
   OBJDB_RETURN_IF_ERROR(inRange(object_shadow_gap_m, 0.0, 2.0, "gsm.object_shadow_gap_m"));
   OBJDB_RETURN_IF_ERROR(
       inRange(structure_update_frames, 1, 1 << 20, "gsm.structure_update_frames"));
+  OBJDB_RETURN_IF_ERROR(inRange(object_min_frames, 1, 1 << 20, "gsm.object_min_frames"));
+  OBJDB_RETURN_IF_ERROR(inRange(reextract_min_change, 0.0, 1.0, "gsm.reextract_min_change"));
   return inRange(object_update_frames, 1, 1 << 20, "gsm.object_update_frames");
 }
 

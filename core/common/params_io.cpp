@@ -61,6 +61,8 @@ void forEachField(GsmParams& p, Fn&& fn) {
   fn("object_shadow_gap_m", p.object_shadow_gap_m);
   fn("object_update_frames", p.object_update_frames);
   fn("structure_update_frames", p.structure_update_frames);
+  fn("object_min_frames", p.object_min_frames);
+  fn("reextract_min_change", p.reextract_min_change);
 }
 template <typename Fn>
 void forEachField(ModelParams& p, Fn&& fn) {

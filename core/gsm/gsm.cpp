@@ -163,6 +163,7 @@ void Gsm::merge(Label keep, Label gone) {
   LabelInfo& g = info_[gone];
   k.voxels += g.voxels;
   k.last_update_frame = std::max(k.last_update_frame, g.last_update_frame);
+  k.frames = std::max(k.frames, g.frames);
   k.extracted_frame = -1;
   if (g.extracted_voxels > 0) withdrawn_.push_back(gone);  // its voxels now come with `keep`
   k.blocks.insert(g.blocks.begin(), g.blocks.end());
@@ -364,6 +365,7 @@ StatusOr<GsmFrameResult> Gsm::integrate(const DepthImage& depth,
     }
     for (const BlockLabel& bl : block_labels) {
       LabelInfo& info = info_[bl.label];
+      if (info.last_update_frame != frame_) ++info.frames;
       info.last_update_frame = frame_;
       info.extracted_frame = -1;
       info.blocks.insert(block.index);
@@ -406,6 +408,31 @@ void applyAnnexed(Label id, const ObjectGroups& groups, std::vector<tsdf::VoxelI
   const auto it = groups.annexed.find(id);
   if (it == groups.annexed.end()) return;
   for (const AnnexedVoxel& a : it->second) voxels->push_back(a.voxel);
+}
+
+std::vector<uint64_t> sortedKeys(const std::vector<tsdf::VoxelIndex>& voxels) {
+  std::vector<uint64_t> keys;
+  keys.reserve(voxels.size());
+  for (const tsdf::VoxelIndex& v : voxels) keys.push_back(packGridKey(v));
+  std::sort(keys.begin(), keys.end());
+  return keys;
+}
+
+// The share of the larger of two sorted key sets that the other lacks (0 when both are empty):
+// what an object gained or lost, whichever is more.
+double changedShare(const std::vector<uint64_t>& a, const std::vector<uint64_t>& b) {
+  size_t common = 0;
+  for (size_t i = 0, j = 0; i < a.size() && j < b.size();) {
+    if (a[i] < b[j]) {
+      ++i;
+    } else if (b[j] < a[i]) {
+      ++j;
+    } else {
+      ++common, ++i, ++j;
+    }
+  }
+  const size_t larger = std::max(a.size(), b.size());
+  return larger == 0 ? 0.0 : 1.0 - double(common) / double(larger);
 }
 
 }  // namespace
@@ -591,6 +618,7 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     for (const Label id : gone) {
       withdrawn_.push_back(id);
       extracted_objects_.erase(id);
+      ++extraction_counts_.withdrawn;
     }
   }
   // Idleness is checked every frame, on the groups of the last regrouping (their labels resolved
@@ -601,10 +629,12 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     for (Label& l : parts) l = resolve(l);
     std::sort(parts.begin(), parts.end());
     parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
-    int64_t last_update = -1;
+    int64_t last_update = -1, frames = 0;
     for (const Label l : parts) {
       const auto it = info_.find(l);
-      if (it != info_.end()) last_update = std::max(last_update, it->second.last_update_frame);
+      if (it == info_.end()) continue;
+      last_update = std::max(last_update, it->second.last_update_frame);
+      frames = std::max(frames, it->second.frames);
     }
     if (last_update < 0) continue;
     const bool idle = frame_ - 1 - last_update >= params_.extraction_age_frames;
@@ -614,16 +644,45 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
         earlier->second.frame > last_update) {
       continue;  // extracted since its last change
     }
+    if (!flush && earlier == extracted_objects_.end() && frames < params_.object_min_frames) {
+      // Flicker so far (GsmParams::object_min_frames): looked at again when it is voted for, and
+      // at the flush (what still stands then was a surface seen once, not taken back).
+      unconfirmed_.insert(id);
+      extraction_counts_.unconfirmed = unconfirmed_.size();
+      continue;
+    }
     std::vector<tsdf::VoxelIndex> voxels = voxelsOf(parts);
     applyAnnexed(id, groups_, &voxels);
     if (voxels.size() < size_t(params_.min_label_voxels)) {
       if (earlier != extracted_objects_.end()) {
         withdrawn_.push_back(id);
         extracted_objects_.erase(earlier);
+        ++extraction_counts_.withdrawn;
       }
       continue;
     }
-    extracted_objects_[id] = ExtractedObject{parts, frame_};
+    std::vector<uint64_t> keys = sortedKeys(voxels);
+    if (earlier != extracted_objects_.end()) {
+      // The same parts as then (through the merges since), and its voxels barely changed: its
+      // stored segment stands, and the change is measured against it next time too. A part that
+      // joined or left re-extracts it: the database would lack a joined part's voxels (its own
+      // object withdrawn) or hold a leaving part's twice.
+      std::vector<Label> then = earlier->second.parts;
+      for (Label& l : then) l = resolve(l);
+      std::sort(then.begin(), then.end());
+      then.erase(std::unique(then.begin(), then.end()), then.end());
+      if (then == parts &&
+          changedShare(earlier->second.voxels, keys) < params_.reextract_min_change) {
+        earlier->second.parts = parts;
+        earlier->second.frame = frame_;
+        ++extraction_counts_.unchanged;
+        continue;
+      }
+      ++extraction_counts_.again;
+    } else {
+      ++extraction_counts_.first;
+    }
+    extracted_objects_[id] = ExtractedObject{parts, std::move(keys), frame_};
     const float depth = observationDepth(voxels, last_update);
     segments.push_back(
         extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_,

@@ -71,6 +71,7 @@ struct GsmFrameResult {
 struct LabelInfo {
   int64_t voxels = 0;             // voxels whose (raw) main label is this label or a merged one
   int64_t last_update_frame = -1;
+  int64_t frames = 0;             // frames that voted for it (of merged labels, the most)
   int64_t extracted_frame = -1;   // −1: not extracted since its last update
   // Voxels at its last extraction (0: never extracted, or withdrawn since). Re-extracting a label
   // that lost a fifth of them to other labels (its stored segment out of date) was tried: on the
@@ -79,6 +80,15 @@ struct LabelInfo {
   int64_t extracted_voxels = 0;
   Eigen::AlignedBox3i bounds;     // voxel indices that ever got a vote for it (empty at first)
   absl::flat_hash_set<tsdf::BlockIndex, tsdf::BlockIndexHash> blocks;  // where it has votes
+};
+
+// What the object extraction did (GsmParams::objects), counted over the session.
+struct ExtractionCounts {
+  size_t first = 0;        // objects extracted for the first time (or again after a withdrawal)
+  size_t again = 0;        // extracted again: updated, and changed by reextract_min_change or more
+  size_t unchanged = 0;    // updated but changed less: the earlier segment stands
+  size_t unconfirmed = 0;  // idle objects held back: no label seen in object_min_frames frames
+  size_t withdrawn = 0;    // extracted objects withdrawn (went into another, or vanished)
 };
 
 // LabelBlocks (objects.h): the main label (after merges; 0 = none) of every voxel of each label
@@ -130,6 +140,8 @@ class Gsm {
   // surface would be kept twice, under its old and its new label). Returned once, then cleared.
   std::vector<Label> takeWithdrawn();
 
+  const ExtractionCounts& extractionCounts() const { return extraction_counts_; }
+
   // The label a (possibly merged-away) label now belongs to.
   Label resolve(Label label) const;
   // Main label of a voxel after merges (0 = none or unallocated).
@@ -177,11 +189,16 @@ class Gsm {
   };
   absl::flat_hash_map<uint64_t, PairEvidence> pair_evidence_;
   std::vector<Label> withdrawn_;  // see takeWithdrawn()
-  // Objects extracted (id → its parts then, and the frame): re-extracted when those change.
+  // Objects extracted (id → its parts then, its voxels (packGridKey, sorted) and the frame):
+  // extracted again when they were updated since and the voxels changed enough
+  // (GsmParams::reextract_min_change).
   struct ExtractedObject {
     std::vector<Label> parts;
+    std::vector<uint64_t> voxels;
     int64_t frame = -1;
   };
+  ExtractionCounts extraction_counts_;
+  absl::flat_hash_set<Label> unconfirmed_;  // objects held back once as flicker (counted)
   absl::flat_hash_map<Label, ExtractedObject> extracted_objects_;
   int64_t grouped_frame_ = -1;  // the frame objects were last regrouped at
   ObjectGroups groups_;  // object id → parts (and annexed structure voxels), as then

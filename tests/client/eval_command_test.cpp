@@ -108,6 +108,11 @@ TEST(EvalCommand, BadInputIsAClearError) {
   r = runProcess({kObjdb, "eval", "--every", "0", dir.path().string()});
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_NE(r.err.find("--every needs a positive integer"), std::string::npos) << r.err;
+  r = runProcess({kObjdb, "eval", "--structure-ids", "1,floor", dir.path().string()});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--structure-ids needs class ids 1-65535 separated by commas, got 1,floor"),
+            std::string::npos)
+      << r.err;
   // A folder in none of the layouts.
   fs::create_directories(dir / "holiday");
   std::ofstream(dir / "holiday" / "notes.txt") << "not a dataset\n";
