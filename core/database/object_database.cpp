@@ -481,14 +481,19 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
   report.timings.descriptors_ms = incoming.timings.descriptors_ms;
   if (!incoming.structure) {
     // A piece of a bigger face (a partition's top, a strip of wall) is structure too: its plane,
-    // grown through the session's scene, is bigger than an object can be.
+    // grown through the session's scene, is bigger than an object can be. Not for an object
+    // the GSM grouped from two or more labels: its grouping never joins a structure label to
+    // anything (core/gsm/objects.h), so the room structure has judged such a segment an object,
+    // and a chair's seat or back grown through the table it is tucked under is no wall.
     const auto t = Clock::now();
-    auto grown = growInScene(session, incoming, live);
-    if (!grown.ok()) {
-      prepared.error = grown.status();
-      return prepared;
+    if (segment.parts.size() < 2) {
+      auto grown = growInScene(session, incoming, live);
+      if (!grown.ok()) {
+        prepared.error = grown.status();
+        return prepared;
+      }
+      report.grown_plane_span_m = *grown;
     }
-    report.grown_plane_span_m = *grown;
     incoming.structure = report.grown_plane_span_m >= params_.model.structure_min_extent_m;
     // What is larger than furniture can be is room structure, as the GSM's grouping decides
     // for its labels (core/gsm/objects.h): a bent strip of floor, a counter's whole run.

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
+#include <map>
 #include <memory>
 #include <numeric>
 
@@ -454,17 +456,21 @@ struct StandingParts {
   }
   // Whether one of a, b stands and carries the other at their contact.
   bool carries(Label a, Label b, const Contact& c) const {
-    if (stands(a) && stands(b)) {
-      // Two standing parts are one base when the smaller stands under the other's footprint (a
-      // leg the segmenter cut from its chair or from a cow's body), or when the lower carries
-      // the higher at its top; a chair beside a table stands apart.
-      if (under(a, b)) return true;
-      const Label lower = height.at(a).second <= height.at(b).second ? a : b;
-      return atTop(lower, c);
-    }
+    if (stands(a) && stands(b)) return oneBase(a, b, c);
     if (stands(a) == stands(b)) return false;
     return atTop(stands(a) ? a : b, c);
   }
+  // Two standing parts are one base when the smaller stands under the other's footprint (a leg
+  // the segmenter cut from its chair or from a cow's body), or when the lower carries the higher
+  // at its top; a chair beside a table stands apart. The smaller of the two joins one base
+  // only (the one it touches most, decided by the caller): a crumb of a chair's leg tucked
+  // under a table lies under both footprints.
+  bool oneBase(Label a, Label b, const Contact& c) const {
+    if (under(a, b)) return true;
+    const Label lower = height.at(a).second <= height.at(b).second ? a : b;
+    return atTop(lower, c);
+  }
+  Label smaller(Label a, Label b) const { return voxels.at(a) <= voxels.at(b) ? a : b; }
   // Whether the smaller of a, b (in voxels) has its centre over the other's footprint.
   bool under(Label a, Label b) const {
     const Label small = voxels.at(a) <= voxels.at(b) ? a : b, big = small == a ? b : a;
@@ -473,8 +479,8 @@ struct StandingParts {
     return (centre.array() >= box.min().array() - voxel).all() &&
            (centre.array() <= box.max().array() + voxel).all();
   }
-  // Whether the contact lies in the top quarter of `base`'s height above the floor.
-  bool atTop(Label base, const Contact& c) const {
+  // The contact's mean height above the floor (NaN: no voxels).
+  float contactHeight(const Contact& c) const {
     double sum = 0.0;
     size_t n = 0;
     for (const auto& side : c.side) {
@@ -483,9 +489,12 @@ struct StandingParts {
         ++n;
       }
     }
-    if (n == 0) return false;
+    return n == 0 ? std::numeric_limits<float>::quiet_NaN() : float(sum / double(n));
+  }
+  // Whether the contact lies in the top quarter of `base`'s height above the floor.
+  bool atTop(Label base, const Contact& c) const {
     const float top = height.at(base).second;
-    return float(sum / double(n)) >= top - 0.25f * (top - floor_m);
+    return contactHeight(c) >= top - 0.25f * (top - floor_m);
   }
   bool unitStands(Label root, absl::flat_hash_map<Label, Label>& parent) const {
     for (const auto& [l, h] : height) {
@@ -693,6 +702,10 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& all_l
   std::vector<std::pair<Label, Label>> supported;  // (resting, support), to be decided below
   const StandingParts standing = standingParts(out.room, voxels_of, voxel);
   std::vector<uint64_t> deferred;  // contacts decided once the standing units are known
+  // A standing part → (contact pairs, the contact key) of the standing part it is one base
+  // with: of its candidates (base_candidates), the one it touches most.
+  std::map<Label, std::pair<int64_t, uint64_t>> base_of;
+  std::vector<uint64_t> base_candidates;
   for (const uint64_t key : keys) {
     Contact& c = contacts[key];
     const Label a = Label(key >> 32), b = Label(key & 0xffffffffULL);
@@ -713,7 +726,23 @@ ObjectGroups groupObjects(const tsdf::TsdfLayer& layer, const LabelBlocks& all_l
       deferred.push_back(key);
       continue;
     }
+    if (standing.known && standing.stands(a) && standing.stands(b)) {
+      // One base for the smaller part, chosen below.
+      const Label child = standing.smaller(a, b);
+      auto& best = base_of[child];
+      if (c.pairs > best.first) best = {c.pairs, key};
+      base_candidates.push_back(key);
+      continue;
+    }
     unite(a, b);
+  }
+  for (const uint64_t key : base_candidates) {
+    const Label a = Label(key >> 32), b = Label(key & 0xffffffffULL);
+    if (base_of.at(standing.smaller(a, b)).second == key) {
+      unite(a, b);
+    } else {
+      deferred.push_back(key);  // kept apart below where both units stand
+    }
   }
   // Units that stand on the floor by themselves stay apart where they touch (a chair tucked
   // under a table); a unit that does not stand (a chair's back, a cow's head) joins the one it

@@ -323,6 +323,14 @@ TEST(ObjectDatabase, APieceOfAFloorAndAWallStripIsStructureWhenTheFloorGrowsOver
   EXPECT_TRUE(r->structure) << "grown to " << r->grown_plane_span_m << " m";
   EXPECT_GE(r->grown_plane_span_m, 1.0f);
   EXPECT_FALSE(r->matchable);
+  // The same surface as an object the GSM grouped from two labels: the room structure judged
+  // it (the grouping never joins a structure label to anything), so it is not grown.
+  raw.label = 6;
+  raw.parts = {6, 7};
+  auto grouped = f.db->insertSegment("s", raw);
+  ASSERT_TRUE(grouped.ok()) << grouped.status();
+  EXPECT_FALSE(grouped->structure);
+  EXPECT_EQ(grouped->grown_plane_span_m, 0.0f);
 }
 
 TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {

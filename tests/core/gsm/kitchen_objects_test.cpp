@@ -93,8 +93,11 @@ std::map<Label, std::map<int, int64_t>> objectVotes(const Fused& k) {
   return out;
 }
 
+// Every frame: with every third frame alone the chairs stayed apart even when a crumb of chair 2's
+// leg, tucked under the table's footprint, made one base of the chair and the table (fixed
+// 2026-12-07: a standing part joins one base only).
 TEST(KitchenObjects, ChairsAreObjectsOfTheirOwnAndNothingIsLargerThanFurniture) {
-  const Fused k = fuseKitchen(0, 3);
+  const Fused k = fuseKitchen(0, 1);
   SCOPED_TRACE(k.groups.room.summary());
   const auto by_object = objectVotes(k);
   // Each chair: the object holding most of its pixels is mostly that chair.

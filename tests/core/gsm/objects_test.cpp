@@ -88,6 +88,17 @@ TEST(Objects, WithoutTheSupportRuleTheMugWouldJoinTheTable) {
   EXPECT_EQ(objectOf(g, label_of, 30), objectOf(g, label_of, 10));
 }
 
+// The scene fused at 2 cm around `centre` (FurnitureScene::fuse) and grouped, with the labels.
+struct Grouping {
+  ObjectGroups groups;
+  std::map<uint16_t, Label> label_of;
+};
+Grouping fuseAndGroup(const Scene& scene, const Eigen::Vector3d& centre) {
+  Gsm gsm = makeGsm();
+  auto label_of = scene.fuse(&gsm, centre);
+  return {gsm.groupObjects(), std::move(label_of)};
+}
+
 TEST(Objects, AChairPushedAgainstATableStaysItsOwnObject) {
   // The hard case (docs/gsm.md): the seat's front edge touches a table leg. The chair stands on
   // its own legs and the table on its own: two objects.
@@ -95,9 +106,7 @@ TEST(Objects, AChairPushedAgainstATableStaysItsOwnObject) {
   scene.addTable(Eigen::Vector3d::Zero(), 10);
   // The chair faces the table (+y) with its seat's front edge against the leg at (−0.45, −0.3).
   scene.addChair(Eigen::Vector3d(-0.45, -0.3 - 0.025 - 0.225, 0), 20);
-  Gsm gsm = makeGsm();
-  const auto label_of = scene.fuse(&gsm, Eigen::Vector3d(0, -0.2, 0.5));
-  const ObjectGroups g = gsm.groupObjects();
+  const auto [g, label_of] = fuseAndGroup(scene, Eigen::Vector3d(0, -0.2, 0.5));
   const Label table = objectOf(g, label_of, 10), chair = objectOf(g, label_of, 20);
   ASSERT_NE(table, 0u);
   ASSERT_NE(chair, 0u);
@@ -105,6 +114,38 @@ TEST(Objects, AChairPushedAgainstATableStaysItsOwnObject) {
   EXPECT_GE(g.standing_cuts, 1u);
   for (uint16_t id = 21; id <= 25; ++id) EXPECT_EQ(objectOf(g, label_of, id), chair) << id;
   for (uint16_t id = 11; id <= 14; ++id) EXPECT_EQ(objectOf(g, label_of, id), table) << id;
+}
+
+TEST(Objects, AStandingCrumbUnderATableAndAChairJoinsOneOfThemOnly) {
+  // A chair (seat 20, back 21, its four legs one label 22) half under a table (top 10, its four
+  // legs one label 11), not touching it; a thin standing crumb (30) between the chair's front
+  // leg and the table's leg touches both and lies under both footprints (so it is one base
+  // with either). It joins one; the chair and the table stay two objects.
+  Scene scene;
+  scene.addBox({1.0f, 0.7f, 0.04f}, Eigen::Vector3d(0, 0, 0.72), 10);
+  for (const double x : {-0.45, 0.45}) {
+    for (const double y : {-0.3, 0.3}) {
+      scene.addBox({0.05f, 0.05f, 0.70f}, Eigen::Vector3d(x, y, 0.35), 11);
+    }
+  }
+  const Eigen::Vector3d chair(0.2, -0.4, 0.0);
+  scene.addBox({0.45f, 0.45f, 0.04f}, chair + Eigen::Vector3d(0, 0, 0.45), 20);
+  scene.addBox({0.45f, 0.04f, 0.45f}, chair + Eigen::Vector3d(0, -0.205, 0.695), 21);
+  for (const double x : {-0.19, 0.19}) {
+    for (const double y : {-0.19, 0.19}) {
+      scene.addBox({0.04f, 0.04f, 0.43f}, chair + Eigen::Vector3d(x, y, 0.215), 22);
+    }
+  }
+  scene.addBox({0.035f, 0.065f, 0.2f}, Eigen::Vector3d(0.4175, -0.2525, 0.1), 30);
+  const auto [g, label_of] = fuseAndGroup(scene, Eigen::Vector3d(0, -0.2, 0.4));
+  const Label table = objectOf(g, label_of, 10), seat = objectOf(g, label_of, 20);
+  ASSERT_NE(table, 0u);
+  ASSERT_NE(seat, 0u);
+  ASSERT_NE(objectOf(g, label_of, 30), 0u) << "the crumb has a label";
+  EXPECT_NE(seat, table);
+  EXPECT_EQ(objectOf(g, label_of, 11), table);
+  EXPECT_EQ(objectOf(g, label_of, 22), seat);
+  EXPECT_TRUE(objectOf(g, label_of, 30) == table || objectOf(g, label_of, 30) == seat);
 }
 
 TEST(Objects, WithoutAFloorAChairPushedAgainstATableJoinsIt) {
