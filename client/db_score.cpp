@@ -195,11 +195,9 @@ TruthScore scoreTruth(const std::vector<Row>& rows, const GroundTruth& truth) {
       double purity = 0.0;
       const int id = truthOf(p, &purity);
       Truth t;
-      const auto session = truth.find(p.session);
-      if (id != 0 && session != truth.end() && session->second.count(id) != 0) {
-        const io::GroundTruthObject& g = session->second.at(id);
-        t.kind = g.category;
-        t.structure = g.is_structure;
+      if (const io::GroundTruthObject* g = trueObject(truth, p.session, id)) {
+        t.kind = g->category;
+        t.structure = g->is_structure;
         t.object = absl::StrFormat("%s/%d", p.session, id);
         ++s.known;
       }

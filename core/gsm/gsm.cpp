@@ -625,10 +625,13 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
   // through the merges since).
   std::vector<RawSegment> segments;
   const int margin = int(std::ceil(tsdf_params_.truncation_voxels));
+  const auto resolveAll = [this](std::vector<Label>* labels) {  // through the merges; sorted
+    for (Label& l : *labels) l = resolve(l);
+    std::sort(labels->begin(), labels->end());
+    labels->erase(std::unique(labels->begin(), labels->end()), labels->end());
+  };
   for (auto& [id, parts] : groups_.members) {
-    for (Label& l : parts) l = resolve(l);
-    std::sort(parts.begin(), parts.end());
-    parts.erase(std::unique(parts.begin(), parts.end()), parts.end());
+    resolveAll(&parts);
     int64_t last_update = -1, frames = 0;
     for (const Label l : parts) {
       const auto it = info_.find(l);
@@ -668,9 +671,7 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
       // joined or left re-extracts it: the database would lack a joined part's voxels (its own
       // object withdrawn) or hold a leaving part's twice.
       std::vector<Label> then = earlier->second.parts;
-      for (Label& l : then) l = resolve(l);
-      std::sort(then.begin(), then.end());
-      then.erase(std::unique(then.begin(), then.end()), then.end());
+      resolveAll(&then);
       if (then == parts &&
           changedShare(earlier->second.voxels, keys) < params_.reextract_min_change) {
         earlier->second.parts = parts;

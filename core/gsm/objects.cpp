@@ -473,7 +473,7 @@ struct StandingParts {
   Label smaller(Label a, Label b) const { return voxels.at(a) <= voxels.at(b) ? a : b; }
   // Whether the smaller of a, b (in voxels) has its centre over the other's footprint.
   bool under(Label a, Label b) const {
-    const Label small = voxels.at(a) <= voxels.at(b) ? a : b, big = small == a ? b : a;
+    const Label small = smaller(a, b), big = small == a ? b : a;
     const auto& box = footprint.at(big);
     const Eigen::Vector2f centre = centre2d.at(small);
     return (centre.array() >= box.min().array() - voxel).all() &&
