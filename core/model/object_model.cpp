@@ -114,17 +114,40 @@ StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
     welded.triangles.emplace_back(remap[size_t(t[0])], remap[size_t(t[1])], remap[size_t(t[2])]);
   }
   welded.computeVertexNormals();
-  // Keep the vertices on a cell touching one of the segment's voxels.
+  // Keep a vertex when the voxel nearest to it is one of the segment's. Marching tetrahedra puts
+  // every vertex on an edge between two voxel centres, nearer the one whose |distance| is smaller,
+  // so that voxel is the one the surface passes through there; rounding each coordinate finds it.
+  // A cell merely touching a segment voxel is not enough: at an object's foot such cells hold the
+  // support's surface too (a ring of counter top around a mug; tests/core/model/
+  // object_model_test.cpp).
+  // A vertex midway between two voxels on an axis-parallel edge (equal |distance| on both sides,
+  // as on an analytic grid) has both as nearest: either being the segment's keeps it. Midway on a
+  // diagonal edge, four or eight voxels are as near; the one whose cube holds it decides.
   PointCloud cloud;
   const float inv = 1.0f / grid.voxelSize();
+  const auto nearestIsInside = [&](const Eigen::Vector3f& p) {
+    const Eigen::Vector3f f = p * inv;  // voxel centres at integer + 0.5
+    Eigen::Vector3i nearest;
+    int tied[3], ties = 0;
+    for (int k = 0; k < 3; ++k) {
+      nearest[k] = int(std::floor(f[k]));
+      const float from_centre = f[k] - (float(nearest[k]) + 0.5f);
+      if (std::abs(std::abs(from_centre) - 0.5f) < 1e-3f) tied[ties++] = k;
+    }
+    if (ties > 1) ties = 0;
+    for (int mask = 0; mask < (1 << ties); ++mask) {
+      Eigen::Vector3i v = nearest;
+      for (int t = 0; t < ties; ++t) {
+        // On a face between voxel nearest and one neighbour: try both sides.
+        if (mask & (1 << t)) v[tied[t]] += (f[tied[t]] - float(nearest[tied[t]]) < 0.5f) ? -1 : 1;
+      }
+      if (inside.contains(packGridKey(v))) return true;
+    }
+    return false;
+  };
   for (size_t i = 0; i < welded.vertices.size(); ++i) {
     const Eigen::Vector3f& p = welded.vertices[i];
-    const Eigen::Vector3i lower = (p * inv - Eigen::Vector3f::Constant(0.5f)).array().floor().cast<int>();
-    bool keep = false;
-    for (int c = 0; c < 8 && !keep; ++c) {
-      keep = inside.contains(packGridKey(lower + Eigen::Vector3i(c & 1, (c >> 1) & 1, (c >> 2) & 1)));
-    }
-    if (!keep) continue;
+    if (!nearestIsInside(p)) continue;
     const Eigen::Vector3f& n = welded.normals[i];
     if (!(n.squaredNorm() > 0.5f)) continue;  // isolated vertex without a usable normal
     cloud.points.push_back(p);

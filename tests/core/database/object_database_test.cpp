@@ -587,7 +587,7 @@ TEST(ObjectDatabase, TheAcceptedCandidateWithTheLowestETsdfTakesTheSegment) {
   }
   ASSERT_EQ(store.modelIds().value().size(), 3u);
   auto db = ObjectDatabase::create(p, &store).value();
-  auto r = db->insertSegment("tuesday", segment(4, kTuesday, -0.25f, 0.15f));
+  auto r = db->insertSegment("tuesday", segment(4, kTuesday, -0.25f, 0.17f));
   ASSERT_TRUE(r.ok()) << r.status();
   ASSERT_EQ(r->results.size(), 3u);
   const CandidateResult* lowest = nullptr;

@@ -74,9 +74,9 @@ void expectKnownTransformRecovered(const model::ModelBuildParams& params,
   const Transform T_source_object =
       Transform(Eigen::Translation3d(0.06, -0.04, 0.03)) *
       Transform(Eigen::AngleAxisd(0.5, Eigen::Vector3d(1, 2, 3).normalized()));
-  // The target saw x ≤ 0.1, the source x ≥ −0.1: 20 cm in common, ball and block included.
-  const model::ObjectModel target = partialView(object, Transform::Identity(), -0.3f, 0.1f, params);
-  const model::ObjectModel source = partialView(object, T_source_object, -0.1f, 0.3f, params);
+  // The target saw x ≤ 0.12, the source x ≥ −0.12: 24 cm in common, ball and block included.
+  const model::ObjectModel target = partialView(object, Transform::Identity(), -0.3f, 0.12f, params);
+  const model::ObjectModel source = partialView(object, T_source_object, -0.12f, 0.3f, params);
   ASSERT_TRUE(target.matchable(ModelParams{}));
   ASSERT_TRUE(source.matchable(ModelParams{}));
   const DescriptorIndex index(target.descriptors);
