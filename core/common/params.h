@@ -272,8 +272,12 @@ struct MergingParams {
   // confirms the match: at least colour_min_pairs pairs of chromatic voxels (both farther than
   // matching::kMinSaturation from grey) agree within colour_max_distance. Grey or colourless
   // surfaces, joins of two stored models, and every check against a scene keep the paper's
-  // thresholds. 0 turns the loosening off.
-  float noise_sigmas = 1.0f;
+  // thresholds. 0 turns the loosening off, the default: where the paper's thresholds refuse a
+  // pair, the safe answer is no merge. Measured 2026-12-07 through the server: on SUN3D the one
+  // merge it admitted was a sofa's arm onto a chair's seat (e_TSDF 3.4 cm, colour confirming), the
+  // lounge and the kitchen preset never reach it (their scale is about 1); earlier it had merged
+  // SUN3D fragment 1's two identical chairs (docs/database.md, "Loosening").
+  float noise_sigmas = 0.0f;
   double minOverlapVoxels(double voxel_size_m) const;
   Status validate() const;
 };

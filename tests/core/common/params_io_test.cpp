@@ -82,7 +82,7 @@ TEST(ParamsJson, TheColourCheckIsSetAndCheckedLikeTheOtherThresholds) {
   ASSERT_FALSE(s.ok());
   EXPECT_THAT(std::string(s.message()), HasSubstr("merging.colour_min_pairs"));
   p.merging.colour_min_pairs = 30;
-  EXPECT_FLOAT_EQ(p.merging.noise_sigmas, 1.0f);
+  EXPECT_FLOAT_EQ(p.merging.noise_sigmas, 0.0f);
   p.merging.noise_sigmas = -1.0f;
   s = p.validate();
   ASSERT_FALSE(s.ok());

@@ -150,6 +150,7 @@ TEST(ObjectDatabase, NoisyDepthLoosensTheThresholdsOnlyWhereColourConfirms) {
   // measured twice as noisy as the model, e*_ICP and e*_TSDF each gain (2 − 1) · σ(3 m).
   Params p = params();
   p.matching.icp_max_rmse_m = 0.0015f;
+  p.merging.noise_sigmas = 1.0f;  // off by default
   const Rgb8 green{120, 170, 60}, grey{150, 150, 150};
   auto run = [&](Rgb8 colour, float noise_scale, const Params& with) {
     Fixture f(with);
