@@ -6,6 +6,7 @@
 #include <grpcpp/support/client_interceptor.h>
 
 #include "absl/status/status.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "server/address.h"
 #include "server/proto_convert.h"
@@ -99,7 +100,12 @@ int reportRpcError(const char* command, const std::string& what, const std::stri
   const std::string code = absl::StatusCodeToString(absl::StatusCode(int(status.error_code())));
   std::fprintf(stderr, "objdb %s: %s failed on %s: %s: %s\n", command, what.c_str(),
                server.c_str(), code.c_str(), status.error_message().c_str());
-  if (status.error_code() == grpc::StatusCode::UNAVAILABLE) {
+  if (status.error_code() == grpc::StatusCode::UNAVAILABLE &&
+      absl::StrContains(status.error_message(), "DNS resolution failed")) {
+    // Starting a server on a name that does not resolve would not help.
+    std::fprintf(stderr, "  (the host name in %s does not resolve: check --server HOST:PORT)\n",
+                 server.c_str());
+  } else if (status.error_code() == grpc::StatusCode::UNAVAILABLE) {
     std::fprintf(stderr, "  (is objdb-server running there? start it with objdb-server --listen %s "
                          "--db FILE.sqlite; a TLS server needs --tls-ca, and a plaintext one "
                          "none)\n",

@@ -1,5 +1,6 @@
 #include "storage/row_codec.h"
 
+#include "absl/container/flat_hash_set.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
@@ -148,10 +149,12 @@ StatusOr<EncodedRawSegment> encodeRawSegment(const database::RawSegmentRecord& s
     return absl::InvalidArgumentError(absl::StrFormat("raw segment %s/%d has no grid",
                                                       segment.key.session, segment.key.label));
   }
-  if (!segment.voxel_parts.empty() && segment.voxel_parts.size() != segment.voxels.size()) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "raw segment %s/%d: %d voxel parts for %d voxels", segment.key.session, segment.key.label,
-        segment.voxel_parts.size(), segment.voxels.size()));
+  const std::string offence =
+      segmentPartsOffence(segment.parts, segment.voxel_parts, segment.voxels.size());
+  if (!offence.empty()) {
+    return absl::InvalidArgumentError(absl::StrFormat("raw segment %s/%d: %s",
+                                                      segment.key.session, segment.key.label,
+                                                      offence));
   }
   EncodedRawSegment e;
   e.pose = encodeTransform(segment.T_world_segment);
@@ -160,6 +163,36 @@ StatusOr<EncodedRawSegment> encodeRawSegment(const database::RawSegmentRecord& s
   if (!segment.voxel_parts.empty()) e.voxel_parts = encodeIndices(segment.voxel_parts, options);
   e.parts = formatParts(segment.parts);
   return e;
+}
+
+std::string segmentPartsOffence(const std::vector<uint32_t>& parts,
+                                const std::vector<uint32_t>& voxel_parts, size_t voxels) {
+  if (voxel_parts.empty()) return "";
+  if (voxel_parts.size() != voxels) {
+    return absl::StrFormat("%d voxel parts for %d voxels", voxel_parts.size(), voxels);
+  }
+  const absl::flat_hash_set<uint32_t> known(parts.begin(), parts.end());
+  for (const uint32_t part : voxel_parts) {
+    if (!known.contains(part)) {
+      return absl::StrFormat("a voxel of part %d, which is not one of its parts (%s)", part,
+                             parts.empty() ? std::string("none recorded") : formatParts(parts));
+    }
+  }
+  return "";
+}
+
+std::optional<ColumnOffence> rawSegmentPartsOffence(const std::string& parts_text,
+                                                    std::string_view voxels,
+                                                    std::string_view voxel_parts) {
+  auto parts = parseParts(parts_text);
+  if (!parts.ok()) return ColumnOffence{"parts", std::string(parts.status().message())};
+  auto list = decodeVoxelList(voxels);
+  if (!list.ok()) return ColumnOffence{"voxels", std::string(list.status().message())};
+  auto of = decodeIndices(voxel_parts);
+  if (!of.ok()) return ColumnOffence{"voxel_parts", std::string(of.status().message())};
+  std::string offence = segmentPartsOffence(*parts, *of, list->size());
+  if (offence.empty()) return std::nullopt;
+  return ColumnOffence{"voxel_parts", std::move(offence)};
 }
 
 RawSegmentColumns readRawSegmentColumns(const Row& row) {
@@ -191,10 +224,10 @@ StatusOr<std::shared_ptr<const database::RawSegmentRecord>> decodeRawSegment(
   if (c.voxel_parts) {
     auto voxel_parts = decodeIndices(*c.voxel_parts);
     if (!voxel_parts.ok()) return inRow(voxel_parts.status(), "raw_segments", id, "voxel_parts");
-    if (voxel_parts->size() != record->voxels.size()) {
-      return inRow(absl::DataLossError(absl::StrFormat("%d voxel parts for %d voxels",
-                                                       voxel_parts->size(), record->voxels.size())),
-                   "raw_segments", id, "voxel_parts");
+    const std::string offence =
+        segmentPartsOffence(record->parts, *voxel_parts, record->voxels.size());
+    if (!offence.empty()) {
+      return inRow(absl::DataLossError(offence), "raw_segments", id, "voxel_parts");
     }
     record->voxel_parts = std::move(*voxel_parts);
   }

@@ -153,6 +153,26 @@ inline constexpr const char* kRawSegmentColumns =
     "r.id, r.pose, r.grid, r.voxels, r.extraction_frame, r.observation_depth_m, r.parts, "
     "r.voxel_parts";
 RawSegmentColumns readRawSegmentColumns(const Row& row);
+// A segment's parts invariant: `voxel_parts` is empty (none recorded) or holds one part per voxel,
+// each of them one of `parts`. The message names the first offence ("a voxel of part 3, which is
+// not one of its parts 1, 2"); the caller chooses the code (writing: INVALID_ARGUMENT, reading:
+// DATA_LOSS).
+std::string segmentPartsOffence(const std::vector<uint32_t>& parts,
+                                const std::vector<uint32_t>& voxel_parts, size_t voxels);
+// The same on a stored row's columns (parts, voxels, voxel_parts), as `objdb db check` reads
+// them: the column at fault and what is wrong with it (a column that does not decode, or the
+// invariant), or nothing when they agree.
+struct ColumnOffence {
+  std::string column, message;
+};
+std::optional<ColumnOffence> rawSegmentPartsOffence(const std::string& parts,
+                                                    std::string_view voxels,
+                                                    std::string_view voxel_parts);
+// The columns rawSegmentPartsOffence reads (with the row id first), of raw_segments rows with voxel parts recorded, in id
+// order (SQL both engines read).
+inline constexpr const char* kRawSegmentPartsQuery =
+    "SELECT id, parts, voxels, voxel_parts FROM raw_segments WHERE voxel_parts IS NOT NULL "
+    "ORDER BY id";
 StatusOr<std::shared_ptr<const database::RawSegmentRecord>> decodeRawSegment(
     const database::SegmentKey& key, const RawSegmentColumns& columns);
 

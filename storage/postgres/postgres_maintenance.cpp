@@ -56,6 +56,16 @@ StatusOr<CheckReport> PostgresStore::check() const {
         }
       }
     }
+    {
+      // What no single column shows: every recorded voxel part is one of the segment's parts.
+      OBJDB_ASSIGN_OR_RETURN(Result r, c.exec(kRawSegmentPartsQuery, "checking raw segment parts"));
+      for (int row = 0; row < r.rows(); ++row) {
+        if (auto offence = rawSegmentPartsOffence(r.text(row, 1), r.bytes(row, 2), r.bytes(row, 3))) {
+          report.damaged.push_back(
+              {"raw_segments", r.integer(row, 0), offence->column, std::move(offence->message)});
+        }
+      }
+    }
     for (const MapTables* tables : {&kSceneTables, &kSavedTables}) {
       OBJDB_ASSIGN_OR_RETURN(
           Result r, c.exec(absl::StrFormat("SELECT b.id, m.voxels_per_side, b.tsdf FROM %s b "

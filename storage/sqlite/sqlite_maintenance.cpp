@@ -56,6 +56,18 @@ StatusOr<CheckReport> SqliteStore::check() const {
       }
     }
   }
+  {
+    // What no single column shows: every recorded voxel part is one of the segment's parts.
+    OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*lease, kRawSegmentPartsQuery));
+    while (true) {
+      OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+      if (!row) break;
+      if (auto offence = rawSegmentPartsOffence(s.columnText(1), s.columnBlob(2), s.columnBlob(3))) {
+        report.damaged.push_back(
+            {"raw_segments", s.columnInt(0), offence->column, std::move(offence->message)});
+      }
+    }
+  }
   for (const MapTables* tables : {&kSceneTables, &kSavedTables}) {
     OBJDB_ASSIGN_OR_RETURN(Statement blocks,
                            Statement::prepare(*lease,

@@ -151,6 +151,13 @@ TEST(StreamCommand, BadArgumentsAndAMissingServerAreClearErrors) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.err, "UNAVAILABLE")) << r.err;
   EXPECT_TRUE(contains(r.err, "is objdb-server running there?")) << r.err;
+  // A host name that does not resolve: no advice to start a server there (issue 47).
+  r = runProcess({kObjdb, "remote", "stats", "--server", "nosuchhost.invalid:50051", "--timeout",
+                  "5"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "UNAVAILABLE")) << r.err;
+  EXPECT_TRUE(contains(r.err, "does not resolve: check --server HOST:PORT")) << r.err;
+  EXPECT_FALSE(contains(r.err, "start it with")) << r.err;
 }
 
 

@@ -137,6 +137,36 @@ TEST(SqliteStore, AFlippedBlobByteFailsThatRowOnly) {
   EXPECT_EQ(store->check().value().damaged.size(), 3u);
 }
 
+// A raw segment whose recorded voxel parts are not all among its parts (issue 47: ListObjects
+// with parts failed with DATA_LOSS while `objdb db check` said ok). Reading it names the row and
+// the part, and the check reports it: no single column shows it, so the check reads them together.
+TEST(SqliteStore, AVoxelPartThatIsNotOneOfTheSegmentsPartsIsDamageTheCheckReports) {
+  TempDir dir;
+  const auto path = dir / "db.sqlite";
+  {
+    auto store = openStore(path);
+    auto segment = makeRawSegment("session_1", 68, 1);
+    segment.parts = {2, 3};
+    for (size_t i = 0; i < segment.voxels.size(); ++i) segment.voxel_parts.push_back(i % 2 ? 3 : 2);
+    ASSERT_TRUE(store->putRawSegment(segment).ok());
+    EXPECT_TRUE(store->check().value().ok());
+  }
+  rawSql(path, "UPDATE raw_segments SET parts = '2'");
+  auto store = openStore(path);
+  const auto read = store->rawSegment({"session_1", 68});
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(read.status().message(), HasSubstr("raw_segments row 1, column voxel_parts"));
+  EXPECT_THAT(read.status().message(),
+              HasSubstr("a voxel of part 3, which is not one of its parts (2)"));
+  const auto report = store->check().value();
+  ASSERT_EQ(report.damaged.size(), 1u);
+  EXPECT_EQ(report.damaged[0].table, "raw_segments");
+  EXPECT_EQ(report.damaged[0].row, 1);
+  EXPECT_EQ(report.damaged[0].column, "voxel_parts");
+  EXPECT_THAT(report.damaged[0].problem, HasSubstr("part 3"));
+}
+
 TEST(SqliteStore, WrongFilesAreRefusedUntouched) {
   TempDir dir;
   {

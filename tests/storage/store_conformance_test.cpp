@@ -310,6 +310,16 @@ TEST_P(StoreConformance, RawSegmentsRoundTripAndAReExtractionReplacesTheRow) {
   EXPECT_THAT(refused.message(),
               HasSubstr(absl::StrFormat("1 voxel parts for %d voxels", uneven.voxels.size())));
   EXPECT_EQ(store->rawSegment({"monday", 5}).status().code(), absl::StatusCode::kNotFound);
+  // And each voxel's part must be one of the segment's parts.
+  auto stray = makeRawSegment("monday", 5, 1);
+  stray.parts = {5, 7};
+  stray.voxel_parts.assign(stray.voxels.size(), 5);
+  stray.voxel_parts.back() = 8;
+  const Status stray_refused = store->putRawSegment(stray);
+  EXPECT_EQ(stray_refused.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(stray_refused.message(),
+              HasSubstr("monday/5: a voxel of part 8, which is not one of its parts (5,7)"));
+  EXPECT_EQ(store->rawSegment({"monday", 5}).status().code(), absl::StatusCode::kNotFound);
 
   // A re-extraction updates the row in place: same id, every field new.
   auto again = makeRawSegment("monday", 4, 2);
