@@ -1,8 +1,25 @@
 #include "core/database/model_store.h"
 
+#include <algorithm>
+
 #include "absl/strings/str_format.h"
 
 namespace objdb::database {
+
+namespace {
+
+// As the stores on disk record a merge: the same source merged into the same model again (a
+// re-extracted segment) supersedes its earlier record.
+void recordMerge(const MergeRecord& merge, std::vector<MergeRecord>* merges) {
+  merges->erase(std::remove_if(merges->begin(), merges->end(),
+                               [&](const MergeRecord& m) {
+                                 return m.target == merge.target && m.source == merge.source;
+                               }),
+                merges->end());
+  merges->push_back(merge);
+}
+
+}  // namespace
 
 bool MatchEntry::matchable(const ModelParams& params) const {
   return model::isMatchable(planar || structure, num_points, num_keypoints, descriptors.size(), params);
@@ -68,7 +85,7 @@ Status InMemoryModelStore::replaceModel(model::ObjectModel model,
     return absl::NotFoundError(absl::StrFormat("no object model %d to replace", model.id));
   }
   it->second = std::make_shared<const model::ObjectModel>(std::move(model));
-  if (merge) merges_.push_back(*merge);
+  if (merge) recordMerge(*merge, &merges_);
   return absl::OkStatus();
 }
 
@@ -85,7 +102,7 @@ Status InMemoryModelStore::absorbModel(model::ObjectModel target, const MergeRec
   }
   it->second = std::make_shared<const model::ObjectModel>(std::move(target));
   models_.erase(absorbed);
-  merges_.push_back(merge);
+  recordMerge(merge, &merges_);
   return absl::OkStatus();
 }
 

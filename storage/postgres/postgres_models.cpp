@@ -130,6 +130,14 @@ Status rewriteModel(const pg::Connection& c, const EncodedModel& e, int64_t id,
   }
   OBJDB_RETURN_IF_ERROR(writeObservations(c, id, e, /*replace=*/true));
   if (merge == nullptr) return absl::OkStatus();
+  // The same source merged into the same model again (a re-extracted segment) supersedes its
+  // earlier record: each merge is in the history once, and `merges` counts merges.
+  Params d;
+  d.add(merge->target).text(merge->source);
+  OBJDB_RETURN_IF_ERROR(
+      c.exec("DELETE FROM merge_records WHERE target = $1 AND source = $2", d,
+             "superseding the earlier record of the merge")
+          .status());
   Params m;
   m.add(merge->target).text(merge->source).bytes(encodeTransform(merge->T_target_source));
   m.add(merge->icp_rmse_m).add(merge->tsdf_rmse_m).add(int64_t(merge->tsdf_overlap));

@@ -105,6 +105,13 @@ Status SqliteStore::rewriteModel(const EncodedModel& e, int64_t id,
   }
   OBJDB_RETURN_IF_ERROR(writeObservations(id, e, /*replace=*/true));
   if (merge == nullptr) return absl::OkStatus();
+  // The same source merged into the same model again (a re-extracted segment) supersedes its
+  // earlier record: each merge is in the history once, and `merges` counts merges.
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement d,
+      Statement::prepare(*writer_, "DELETE FROM merge_records WHERE target = ? AND source = ?"));
+  d.bind(1, merge->target).bind(2, merge->source);
+  OBJDB_RETURN_IF_ERROR(d.run());
   OBJDB_ASSIGN_OR_RETURN(Statement m,
                          Statement::prepare(*writer_,
                                             "INSERT INTO merge_records(target, source, transform, "

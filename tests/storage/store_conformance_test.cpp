@@ -501,6 +501,19 @@ TEST_P(StoreConformance, MergeRecordsListEveryMergeAndMergeRecordsIntoOnlyTheTar
   EXPECT_EQ(diffMerges(into_b[0], r3), "");
   EXPECT_TRUE(store->mergeRecordsInto(c).value().empty()) << "the absorbed one was the source";
   EXPECT_TRUE(store->mergeRecordsInto(c + b + a + 100).value().empty());
+  // A re-extracted segment merged into the same model again: its new record replaces the old one,
+  // so each merge is listed once and the model's merge count counts merges (issue 47: a lounge
+  // model listed one segment four times and "merges 7" for 3 placements).
+  const database::MergeRecord again = makeMerge(a, "segment s0/5", 0.015);
+  ASSERT_TRUE(store->replaceModel(grown(a, 14), again).ok());
+  const auto into_a_again = store->mergeRecordsInto(a).value();
+  ASSERT_EQ(into_a_again.size(), 3u);
+  EXPECT_EQ(diffMerges(into_a_again[0], r2), "");
+  EXPECT_EQ(diffMerges(into_a_again[1], r4), "");
+  EXPECT_EQ(diffMerges(into_a_again[2], again), "");
+  EXPECT_EQ(store->mergeRecords().value().size(), 4u);
+  ModelQuery query;
+  EXPECT_EQ(findSummary(store->modelSummaries(query).value(), a)->merges, 3);
 }
 
 TEST_P(StoreConformance, AHealthyStoreChecksOkAndCountsItsModels) {
