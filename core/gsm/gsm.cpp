@@ -688,13 +688,15 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     segments.push_back(
         extractRawSegment(layer_, id, std::move(voxels), margin, last_update, frame_,
                           [this, &parts](const tsdf::VoxelIndex& v) {
+                            // Always one of the object's parts (the store refuses anything else).
                             const Label main = mainLabel(v);
-                            const Label part = groups_.partAt(v, main);
-                            if (part == main) return main;
-                            // An annexed voxel: the part it joined, through the merges since
-                            // (one of the object's parts; the object's first if that went
-                            // elsewhere).
-                            const Label now = resolve(part);
+                            if (std::binary_search(parts.begin(), parts.end(), main)) return main;
+                            // An annexed voxel: the part that took it, through the merges since;
+                            // the object's first if that went elsewhere. Its own label may be one
+                            // that is newer than the grouping (not known as structure there), so
+                            // it is looked up by voxel, not through partAt's structure test.
+                            const auto it = groups_.annexed_part.find(packGridKey(v));
+                            const Label now = it == groups_.annexed_part.end() ? 0 : resolve(it->second);
                             return std::binary_search(parts.begin(), parts.end(), now)
                                        ? now
                                        : parts.front();

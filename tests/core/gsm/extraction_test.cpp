@@ -1,12 +1,16 @@
 // When the GSM hands an object to the database (Gsm::extractIdle with GsmParams::objects): not
 // while it is flicker seen in one frame (object_min_frames), and not again when it was updated
 // but its voxels barely changed (reextract_min_change).
+#include <algorithm>
 #include <set>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "core/gsm/gsm.h"
+#include "core/segmentation/depth_segmenter.h"
+#include "core/sim/generator.h"
+#include "core/sim/lounge.h"
 #include "tests/support/furniture_scene.h"
 
 namespace objdb::gsm {
@@ -100,6 +104,47 @@ TEST(Extraction, AnObjectSeenAgainAsBeforeIsNotExtractedAgain) {
     EXPECT_EQ(gsm.extractionCounts().unchanged >= 1, min_change > 0.0f);
     EXPECT_TRUE(gsm.takeWithdrawn().empty()) << "its stored segment stands either way";
   }
+}
+
+
+// Every voxel of an extracted object names one of its parts (the store refuses anything else;
+// before, ListObjects with parts failed with DATA_LOSS). The lounge's second session through the
+// real segmenter, extracting as the server does every frame: a voxel an object annexed from a
+// structure label whose voxels changed label after the grouping named that newer label.
+TEST(Extraction, EveryVoxelOfAnExtractedObjectIsOneOfItsParts) {
+  const auto sessions = sim::loungePreset();
+  ASSERT_TRUE(sessions.ok()) << sessions.status();
+  const sim::Scene& scene = (*sessions)[1];
+  const auto built = sim::buildScene(scene);
+  ASSERT_TRUE(built.ok()) << built.status();
+  const auto poses = sim::sampleTrajectory(scene.trajectory);
+  ASSERT_TRUE(poses.ok());
+  const sim::Renderer renderer(scene.intrinsics);
+  auto segmenter =
+      segmentation::DepthSegmenter::create(SegmentationParams{}, scene.intrinsics).value();
+  Gsm gsm = Gsm::create(TsdfParams{}, GsmParams{}, scene.intrinsics).value();
+  size_t segments = 0;
+  const auto check = [&](const std::vector<RawSegment>& extracted) {
+    for (const RawSegment& s : extracted) {
+      ++segments;
+      ASSERT_EQ(s.voxel_parts.size(), s.label_voxels.size()) << "segment " << s.label;
+      for (const Label part : s.voxel_parts) {
+        ASSERT_TRUE(std::binary_search(s.parts.begin(), s.parts.end(), part))
+            << "segment " << s.label << ": a voxel of part " << part << ", not one of "
+            << ::testing::PrintToString(s.parts);
+      }
+    }
+  };
+  for (size_t f = 0; f < poses->size(); ++f) {
+    const Frame frame = sim::renderFrame(scene, *built, renderer, (*poses)[f], f, false);
+    const auto seg = segmenter.segment(frame.depth, nullptr);
+    ASSERT_TRUE(seg.ok()) << seg.status();
+    ASSERT_TRUE(gsm.integrate(frame.depth, seg->labels, frame.T_world_camera).ok());
+    check(gsm.extractIdle());
+    if (HasFatalFailure()) return;
+  }
+  check(gsm.extractIdle(/*flush=*/true));
+  EXPECT_GT(segments, 50u);
 }
 
 }  // namespace
