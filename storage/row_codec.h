@@ -168,8 +168,8 @@ struct ColumnOffence {
 std::optional<ColumnOffence> rawSegmentPartsOffence(const std::string& parts,
                                                     std::string_view voxels,
                                                     std::string_view voxel_parts);
-// The columns rawSegmentPartsOffence reads (with the row id first), of raw_segments rows with voxel parts recorded, in id
-// order (SQL both engines read).
+// The columns rawSegmentPartsOffence reads (the row id first) of the raw_segments rows with voxel
+// parts recorded, in id order (SQL both engines read).
 inline constexpr const char* kRawSegmentPartsQuery =
     "SELECT id, parts, voxels, voxel_parts FROM raw_segments WHERE voxel_parts IS NOT NULL "
     "ORDER BY id";

@@ -116,34 +116,27 @@ StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
   welded.computeVertexNormals();
   // Keep a vertex when the voxel nearest to it is one of the segment's. Marching tetrahedra puts
   // every vertex on an edge between two voxel centres, nearer the one whose |distance| is smaller,
-  // so that voxel is the one the surface passes through there; rounding each coordinate finds it.
-  // A cell merely touching a segment voxel is not enough: at an object's foot such cells hold the
-  // support's surface too (a ring of counter top around a mug; tests/core/model/
-  // object_model_test.cpp).
-  // A vertex midway between two voxels on an axis-parallel edge (equal |distance| on both sides,
-  // as on an analytic grid) has both as nearest: either being the segment's keeps it. Midway on a
-  // diagonal edge, four or eight voxels are as near; the one whose cube holds it decides.
+  // so that voxel (the one whose cube holds the vertex) is the one the surface passes through
+  // there. A cell merely touching a segment voxel is not enough: at an object's foot such cells
+  // hold the support's surface too (a ring of counter top around a mug; tests/core/model/
+  // object_model_test.cpp). A vertex midway on an axis-parallel edge (equal |distance| on both
+  // sides, as on an analytic grid) has both voxels as nearest: either being the segment's keeps
+  // it. Midway on a diagonal edge, the cube that holds it decides.
   PointCloud cloud;
   const float inv = 1.0f / grid.voxelSize();
   const auto nearestIsInside = [&](const Eigen::Vector3f& p) {
     const Eigen::Vector3f f = p * inv;  // voxel centres at integer + 0.5
-    Eigen::Vector3i nearest;
-    int tied[3], ties = 0;
+    const Eigen::Vector3i holder = f.array().floor().cast<int>();
+    if (inside.contains(packGridKey(holder))) return true;
+    int tied = -1, ties = 0;
     for (int k = 0; k < 3; ++k) {
-      nearest[k] = int(std::floor(f[k]));
-      const float from_centre = f[k] - (float(nearest[k]) + 0.5f);
-      if (std::abs(std::abs(from_centre) - 0.5f) < 1e-3f) tied[ties++] = k;
+      const float from_centre = f[k] - (float(holder[k]) + 0.5f);
+      if (std::abs(std::abs(from_centre) - 0.5f) < 1e-3f) tied = k, ++ties;
     }
-    if (ties > 1) ties = 0;
-    for (int mask = 0; mask < (1 << ties); ++mask) {
-      Eigen::Vector3i v = nearest;
-      for (int t = 0; t < ties; ++t) {
-        // On a face between voxel nearest and one neighbour: try both sides.
-        if (mask & (1 << t)) v[tied[t]] += (f[tied[t]] - float(nearest[tied[t]]) < 0.5f) ? -1 : 1;
-      }
-      if (inside.contains(packGridKey(v))) return true;
-    }
-    return false;
+    if (ties != 1) return false;
+    Eigen::Vector3i other = holder;
+    other[tied] += f[tied] - float(holder[tied]) < 0.5f ? -1 : 1;  // across the cube's face
+    return inside.contains(packGridKey(other));
   };
   for (size_t i = 0; i < welded.vertices.size(); ++i) {
     const Eigen::Vector3f& p = welded.vertices[i];
