@@ -2,6 +2,7 @@
 
 #include "core/common/params_io.h"
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
 #include <algorithm>
@@ -49,6 +50,10 @@ StatusOr<std::vector<std::pair<std::string, std::filesystem::path>>> datasetSess
     for (const auto& c : children) out.emplace_back(c.filename().string(), c);
   }
   return out;
+}
+
+std::string counted(uint64_t n, const std::string& noun, const std::string& plural) {
+  return absl::StrCat(n, " ", n == 1 ? noun : plural.empty() ? noun + "s" : plural);
 }
 
 bool parseInt(const char* text, long long lo, long long hi, long long* out) {

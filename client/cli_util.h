@@ -23,6 +23,9 @@ std::vector<std::filesystem::path> datasetSubfolders(const std::filesystem::path
 StatusOr<std::vector<std::pair<std::string, std::filesystem::path>>> datasetSessions(
     const std::vector<std::string>& paths);
 
+// "1 pose", "3 poses": `n` and the noun, plural unless n is 1 (`plural` empty: noun + "s").
+std::string counted(uint64_t n, const std::string& noun, const std::string& plural = "");
+
 // Parses a whole decimal integer within [lo, hi]; false on anything else.
 bool parseInt(const char* text, long long lo, long long hi, long long* out);
 

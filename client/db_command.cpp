@@ -43,9 +43,9 @@ it) or a PostgreSQL database named by a libpq URI (postgresql://USER@HOST/DB; cr
            structure; lists each finding (table, row, column, problem); exit status 1 on any
   stats    schema version, file size, rows and blob bytes per table, models by state, sessions
   models   one line per active model: id, observations, points, keypoints, planar, sessions
-  export   a model's surface cloud with normals (--what cloud, the default) or the mesh of its
-           TSDF grid (--what mesh; voxels lighter than --min-weight, default 3, are not meshed),
-           in the model's own frame, as binary PLY
+  export   the mesh of a model's TSDF grid (--what mesh, the default, as `objdb remote object`
+           writes; voxels lighter than --min-weight, default 3, are not meshed) or its surface
+           cloud with normals (--what cloud), in the model's own frame, as binary PLY
   complete the session's scene map completed by the merged models: every model built from two or
            more segments is placed where the session saw it and, where it verifies against the
            scene (e*_TSDF, o*_TSDF), fills what the session never observed. Writes the completed
@@ -147,8 +147,10 @@ int exportModel(const storage::Store& store, long long id, const std::string& ou
     count = mesh.vertices.size();
   }
   if (!written.ok()) return cli::reportError(kCommand, written);
-  std::printf("model %lld: %s with %zu %s written to %s\n", id, what.c_str(), count,
-              what == "cloud" ? "points" : "vertices", out.c_str());
+  std::printf("model %lld: %s with %s written to %s\n", id, what.c_str(),
+              cli::counted(count, what == "cloud" ? "point" : "vertex", what == "cloud" ? "" : "vertices")
+                  .c_str(),
+              out.c_str());
   return 0;
 }
 
@@ -291,7 +293,7 @@ int runDbCommand(int argc, char** argv) {
       action != "complete" && action != "backup" && action != "replay") {
     return cli::usageError(kCommand, "unknown action \"" + action + "\"", kUsage);
   }
-  std::string db, out, what = "cloud", session, config;
+  std::string db, out, what = "mesh", session, config;
   long long model_id = -1;
   double min_weight = -1.0;  // not given: 3 for export, the session's mesh weight for complete
   for (int i = 2; i < argc; ++i) {

@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "absl/strings/str_format.h"
+#include "client/cli_util.h"
 
 namespace objdb::cli {
 namespace {
@@ -62,6 +63,12 @@ void drawCloud(const std::vector<Eigen::Vector3f>& points, cv::Mat* panel) {
 
 void sheetText(cv::Mat* image, const std::string& line, int x, int y, double scale,
                const cv::Scalar& colour) {
+  // A line wider than the panel is drawn smaller, never cut (issue 47: "…3 places, objec").
+  int baseline = 0;
+  const int width =
+      cv::getTextSize(line, cv::FONT_HERSHEY_SIMPLEX, scale, 1, &baseline).width;
+  const int room = image->cols - x - 4;
+  if (width > room && room > 0) scale *= double(room) / double(width);
   cv::putText(*image, line, cv::Point(x, y), cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1,
               cv::LINE_AA);
 }
@@ -77,13 +84,14 @@ Status drawSheetRow(const Row& row,
   const Eigen::Vector3d e = s.bbox_max - s.bbox_min;
   const size_t n = places(row);
   sheetText(&info,
-            absl::StrFormat("object %d: %d segments at %d place%s, %s", s.id,
-                            s.observations.size(), n, n == 1 ? "" : "s",
+            absl::StrFormat("object %d: %s at %s, %s", s.id,
+                            cli::counted(s.observations.size(), "segment"),
+                            cli::counted(n, "place"),
                             s.structure ? "STRUCTURE" : s.planar ? "planar" : "object"),
             8, 20, 0.55);
   sheetText(&info,
-            absl::StrFormat("extent %.2f x %.2f x %.2f m, %d points", e.x(), e.y(), e.z(),
-                            s.num_points),
+            absl::StrFormat("extent %.2f x %.2f x %.2f m, %s", e.x(), e.y(), e.z(),
+                            cli::counted(s.num_points, "point")),
             8, 42);
   int y = 64;
   for (const auto& m : row.merges) {

@@ -101,10 +101,16 @@ int sessions(v1::ObjectDatabase::Stub& stub, const Options& o) {
     for (const auto& s : page.sessions()) {
       std::string state = v1::SessionState_Name(s.state());
       state = state.substr(std::string("SESSION_STATE_").size());
-      std::printf("%-24s %-12s %8llu %10llu %10llu  %s\n", s.session_name().c_str(), state.c_str(),
-                  (unsigned long long)s.counters().frames_integrated(),
-                  (unsigned long long)s.counters().segments_extracted(),
-                  (unsigned long long)s.counters().objects_created(), s.client_info().c_str());
+      // Counters a crash lost are unknown ("?"), not zero.
+      auto count = [&](uint64_t n, bool known) {
+        return known ? std::to_string(n) : std::string("?");
+      };
+      const bool known = !s.counters_unknown();
+      const v1::SessionCounters& c = s.counters();
+      std::printf("%-24s %-12s %8s %10s %10s  %s\n", s.session_name().c_str(), state.c_str(),
+                  count(c.frames_integrated(), known || c.frames_integrated() > 0).c_str(),
+                  count(c.segments_extracted(), known).c_str(),
+                  count(c.objects_created(), known).c_str(), s.client_info().c_str());
     }
     if (page.next_page_token().empty()) return 0;
     request.set_page_token(page.next_page_token());
@@ -218,6 +224,7 @@ int runRemoteCommand(int argc, char** argv) {
     return 0;
   }
   Options o;
+  bool what_given = false;
   for (int i = 2; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "-h" || a == "--help") {
@@ -250,6 +257,7 @@ int runRemoteCommand(int argc, char** argv) {
       o.out = value;
     } else if (a == "--what") {
       o.what = value;
+      what_given = true;
       if (o.what != "mesh" && o.what != "cloud") {
         return cli::usageError(kCommand, "--what must be mesh or cloud, got " + o.what, kUsage);
       }
@@ -267,6 +275,10 @@ int runRemoteCommand(int argc, char** argv) {
     }
   }
   if (o.connection.server.empty()) return cli::usageError(kCommand, "--server is empty", kUsage);
+  if (what_given && o.out.empty()) {
+    return cli::usageError(kCommand, "--what says what --out FILE.ply gets; give --out too",
+                           kUsage);
+  }
   auto channel = cli::openChannel(o.connection);
   if (!channel.ok()) return cli::reportError(kCommand, channel.status());
   auto stub = v1::ObjectDatabase::NewStub(*channel);

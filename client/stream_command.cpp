@@ -27,12 +27,19 @@ constexpr const char* kCommand = "stream";
 constexpr const char* kUsage = R"(usage: objdb stream [--server HOST:PORT] DATASET... [options]
 
 Streams datasets to an objdb server: each dataset (objdb or TUM layout) is one session, named
-after its folder; a folder holding several sessions (the lounge of `objdb sim --preset lounge`)
-streams each of them, in name order. The server segments every frame, fuses it into the session's
+after its folder (or --session); a folder holding several sessions (the lounge of `objdb sim
+--preset lounge`) streams each of them, in name order. A name the database has already is refused
+unless --resume or --replace says what to do with it. The server segments every frame, fuses it into the session's
 Global Segmentation Map and inserts extracted segments into its object database; this command
 shows its acks and events, then ends the session (EndSession), which stores the session's map.
 
 )" OBJDB_CONNECTION_USAGE R"(  --params FILE        per-session parameter overrides as JSON (segmentation, tsdf, gsm sections)
+  --session NAME       the session's name (one dataset only; default: its folder's name)
+  --resume             continue a session of that name whose stream broke (client killed, network,
+                       a bad file): the server says which frames its map holds, the rest are sent;
+                       a name not in use starts a new session
+  --replace            stream a session of that name again: its segments are withdrawn from the
+                       database first (its record is kept as NAME.replaced-TIME)
   --every N            send every N-th frame (default 1)
   --no-end             leave the sessions open (EndSession later, or never)
   --end-timeout S      seconds EndSession may take (default 600)
@@ -47,7 +54,8 @@ exit status: 0 all sessions streamed (rejected frames are reported, not fatal); 
 
 int runStreamCommand(int argc, char** argv) {
   cli::StreamOptions options;
-  std::string params_file;
+  std::string params_file, session_name;
+  bool session_given = false;
   std::vector<std::string> datasets;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -63,6 +71,15 @@ int runStreamCommand(int argc, char** argv) {
       options.end = false;
       continue;
     }
+    if (a == "--resume" || a == "--replace") {
+      const auto wanted = a == "--resume" ? v1::SessionHeader::IF_EXISTS_RESUME
+                                          : v1::SessionHeader::IF_EXISTS_REPLACE;
+      if (options.if_exists != v1::SessionHeader::IF_EXISTS_REFUSE && options.if_exists != wanted) {
+        return cli::usageError(kCommand, "--resume and --replace exclude each other", kUsage);
+      }
+      options.if_exists = wanted;
+      continue;
+    }
     if (a.rfind("--", 0) != 0) {
       datasets.push_back(a);
       continue;
@@ -71,6 +88,9 @@ int runStreamCommand(int argc, char** argv) {
     const char* value = argv[++i];
     long long seconds = 0;
     if (cli::takeConnectionFlag(a, value, &options.connection)) {
+    } else if (a == "--session") {
+      session_name = value;
+      session_given = true;
     } else if (a == "--params") {
       params_file = value;
     } else if (a == "--every") {
@@ -95,6 +115,16 @@ int runStreamCommand(int argc, char** argv) {
   }
   auto sessions = cli::datasetSessions(datasets);
   if (!sessions.ok()) return cli::reportError(kCommand, sessions.status());
+  if (session_given) {
+    if (sessions->size() != 1) {
+      return cli::usageError(kCommand,
+                             absl::StrFormat("--session names one session, but the datasets hold "
+                                             "%d",
+                                             sessions->size()),
+                             kUsage);
+    }
+    (*sessions)[0].first = session_name;  // checked by the server like any name
+  }
   auto channel = cli::openChannel(options.connection);
   if (!channel.ok()) return cli::reportError(kCommand, channel.status());
   auto stub = v1::ObjectDatabase::NewStub(*channel);

@@ -1,7 +1,9 @@
 #include "client/stream_session.h"
 
 #include <cstdio>
+#include <future>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "client/cli_util.h"
@@ -18,16 +20,24 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   std::printf("session %s: %zu frames from %s to %s\n", name.c_str(), frames,
               ds.root().c_str(), options.connection.server.c_str());
 
-  // The reader: acks drive the progress bar; rejections and (with -v) events are printed.
+  // The reader: the session's first answer (SessionOpened) goes to the writer; acks drive the
+  // progress bar (made once the writer knows what it sends); rejections and (with -v) events are
+  // printed.
   std::mutex print_mutex;
   size_t acked = 0, rejected = 0, segments = 0, created = 0, merged = 0, joined = 0, removed = 0;
   v1::SessionSummary summary;
-  ProgressBar bar("  segmenting, fusing, inserting on the server", frames);
+  std::optional<ProgressBar> bar;
+  std::promise<std::optional<v1::SessionOpened>> opened_promise;
+  bool opened_told = false;
   std::thread reader([&] {
     v1::IngestResponse response;
     while (stream->Read(&response)) {
       std::lock_guard lock(print_mutex);
       switch (response.event_case()) {
+        case v1::IngestResponse::kOpened:
+          if (!opened_told) opened_promise.set_value(response.opened());
+          opened_told = true;
+          break;
         case v1::IngestResponse::kAck:
           ++acked;
           if (!response.ack().accepted()) {
@@ -36,7 +46,7 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
                          (unsigned long long)response.ack().index(),
                          response.ack().reason().c_str());
           }
-          bar.update(acked);
+          if (bar) bar->update(acked);
           break;
         case v1::IngestResponse::kSegment:
           ++segments;
@@ -92,6 +102,9 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
           break;
       }
     }
+    std::lock_guard lock(print_mutex);
+    if (!opened_told) opened_promise.set_value(std::nullopt);  // refused: Finish says why
+    opened_told = true;
   });
 
   v1::IngestRequest request;
@@ -100,12 +113,39 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   *header.mutable_intrinsics() = server::toProto(ds.intrinsics());
   header.set_params_json(options.params_json);
   header.set_client_info("objdb stream");
+  header.set_if_exists(options.if_exists);
   bool open = stream->Write(request);
+  // The frames the session holds already (resumed) are not sent again.
+  const std::optional<v1::SessionOpened> opened =
+      open ? opened_promise.get_future().get() : std::nullopt;
+  open = open && opened.has_value();
+  size_t first = 0;
+  if (opened && opened->resumed() && opened->has_frames()) {
+    first = size_t(opened->last_frame_index()) + 1;
+    first = (first + size_t(options.every) - 1) / size_t(options.every) * size_t(options.every);
+    std::printf("  resumed: its map holds %llu frames, up to frame %llu; sending from frame %zu\n",
+                (unsigned long long)opened->counters().frames_integrated(),
+                (unsigned long long)opened->last_frame_index(), first);
+  } else if (opened && opened->resumed()) {
+    std::printf("  resumed: it holds no frame yet\n");
+  } else if (opened && opened->replaced()) {
+    std::printf("  replaced the earlier session of this name: %llu of its segments withdrawn\n",
+                (unsigned long long)opened->segments_withdrawn());
+  }
+  {
+    std::lock_guard lock(print_mutex);
+    const size_t to_send =
+        first < ds.size() ? (ds.size() - first + size_t(options.every) - 1) / size_t(options.every)
+                          : 0;
+    bar.emplace("  segmenting, fusing, inserting on the server", to_send);
+  }
   Status load_error = absl::OkStatus();
-  for (size_t i = 0; open && i < ds.size(); i += size_t(options.every)) {
+  size_t failed_frame = 0;
+  for (size_t i = first; open && i < ds.size(); i += size_t(options.every)) {
     auto frame = ds.loadFrame(i);
     if (!frame.ok()) {
       load_error = frame.status();
+      failed_frame = i;
       break;
     }
     request.Clear();
@@ -121,12 +161,22 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   stream->WritesDone();
   reader.join();
   const grpc::Status status = stream->Finish();
-  bar.finish();
-  if (!load_error.ok()) return reportError(command, load_error);
+  if (bar) bar->finish();
+  if (!load_error.ok()) {
+    const int rc = reportError(command, load_error);
+    std::fprintf(stderr,
+                 "objdb %s: session %s stops before frame %zu (the server keeps its map for a "
+                 "while); once the file is fixed, the same command with --resume continues it "
+                 "from there, or --replace streams it again\n",
+                 command, name.c_str(), failed_frame);
+    return rc;
+  }
   if (!status.ok()) return reportRpcError(command, "Ingest of session " + name, options.connection.server, status);
-  std::printf("  %zu frames acked (%zu rejected), %zu segments into the database (%zu new objects, "
-              "%zu merged into earlier ones; %zu objects merged into others, %zu removed)\n",
-              acked, rejected, segments, created, merged, joined, removed);
+  std::printf("  %s acked (%zu rejected), %s into the database (%s, %zu merged into earlier "
+              "ones; %s merged into others, %zu removed)\n",
+              counted(acked, "frame").c_str(), rejected, counted(segments, "segment").c_str(),
+              counted(created, "new object").c_str(), merged,
+              counted(joined, "object").c_str(), removed);
   if (!options.end) {
     std::printf("  session %s left open (--no-end)\n", name.c_str());
     return 0;
@@ -141,12 +191,15 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
     return reportRpcError(command, "EndSession of " + name, options.connection.server, end_status);
   }
   const v1::SessionCounters& c = ended.summary().counters();
-  std::printf("  ended: %llu frames integrated, %llu segments (%llu new objects, %llu merges, "
-              "%llu withdrawn, %llu objects joined others); %d objects observed in the session\n",
-              (unsigned long long)c.frames_integrated(), (unsigned long long)c.segments_extracted(),
-              (unsigned long long)c.objects_created(), (unsigned long long)c.objects_merged(),
-              (unsigned long long)c.segments_withdrawn(), (unsigned long long)c.objects_joined(),
-              ended.summary().object_ids_size());
+  std::printf("  ended: %s integrated, %s (%s, %s, %llu withdrawn, %s joined others); %s "
+              "observed in the session\n",
+              counted(c.frames_integrated(), "frame").c_str(),
+              counted(c.segments_extracted(), "segment").c_str(),
+              counted(c.objects_created(), "new object").c_str(),
+              counted(c.objects_merged(), "merge").c_str(),
+              (unsigned long long)c.segments_withdrawn(),
+              counted(c.objects_joined(), "object").c_str(),
+              counted(uint64_t(ended.summary().object_ids_size()), "object").c_str());
   return 0;
 }
 

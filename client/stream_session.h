@@ -16,13 +16,18 @@ namespace objdb::cli {
 struct StreamOptions {
   Connection connection;
   std::string params_json;
+  // A session of that name exists already: refuse (the server's ALREADY_EXISTS), continue it
+  // after the last frame its map holds (--resume), or withdraw it and stream it again
+  // (--replace).
+  v1::SessionHeader::IfExists if_exists = v1::SessionHeader::IF_EXISTS_REFUSE;
   long long every = 1;
   bool end = true;
   double end_timeout_s = 600.0;
   bool verbose = false;
 };
 
-// Streams one session and prints its summary; errors are printed as "objdb <command>: ...".
+// Streams one session and prints its summary (a resumed one from the first frame after the ones
+// its map holds); errors are printed as "objdb <command>: ...".
 // Returns the process exit status (0, or 1 when a call or the dataset failed).
 int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const io::Dataset& ds,
                   const StreamOptions& options, const char* command);

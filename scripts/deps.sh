@@ -1,5 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian packages objdb needs, skipping the ones already present.
+#   scripts/deps.sh [--build-only] [EXTRA_PACKAGE...]
+# --build-only: what building objdb-server and objdb needs (docker/Dockerfile's build stage), not
+# the test and benchmark packages (PostgreSQL, GoogleTest, Python, Chromium).
 # Extra packages may be given as arguments (scripts/peer_bench.sh: libopen3d-dev). postgresql is
 # the server the PostgreSQL tests start their own throwaway cluster with (scripts/pg_test_cluster.sh);
 # the python3 packages are the Python client's (client/python) and its tests'; libcpp-httplib-dev
@@ -8,18 +11,27 @@
 # Safe to run repeatedly; a second run with everything installed takes well under a second.
 set -euo pipefail
 
-PACKAGES=(
+BUILD_PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libabsl-dev
   libpcl-dev libflann-dev liblz4-dev libopencv-dev libeigen3-dev
   libsqlite3-dev libzstd-dev zlib1g-dev
-  postgresql libpq-dev
+  libpq-dev
   libspdlog-dev libfmt-dev nlohmann-json3-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
   openssl libssl-dev libcpp-httplib-dev libjs-three
-  python3 python3-grpcio python3-protobuf python3-numpy python3-pytest
+)
+TEST_PACKAGES=(
+  postgresql
+  libgtest-dev libgmock-dev libbenchmark-dev
+  python3 python3-grpcio python3-protobuf python3-numpy python3-pytest python3-yaml
   chromium chromium-driver python3-selenium
 )
+PACKAGES=("${BUILD_PACKAGES[@]}")
+if [[ "${1:-}" == "--build-only" ]]; then
+  shift
+else
+  PACKAGES+=("${TEST_PACKAGES[@]}")
+fi
 PACKAGES+=("$@")
 
 missing=()

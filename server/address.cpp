@@ -1,10 +1,16 @@
 #include "server/address.h"
 
 #include <arpa/inet.h>
+#include <netdb.h>
+#include <sys/socket.h>
+#include <unistd.h>
 #include <netinet/in.h>
 
 #include <algorithm>
 #include <cctype>
+
+#include <cerrno>
+#include <cstring>
 
 #include "absl/strings/str_cat.h"
 
@@ -79,6 +85,41 @@ StatusOr<ListenAddress> parseListenAddress(const std::string& address) {
     result.loopback = lower == "localhost";
   }
   return result;
+}
+
+Status probeListenAddress(const ListenAddress& address, const std::string& as_written) {
+  if (address.port == 0) return absl::OkStatus();
+  std::string host = address.host;
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') {
+    host = host.substr(1, host.size() - 2);
+  }
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  hints.ai_flags = AI_PASSIVE;
+  addrinfo* found = nullptr;
+  const std::string port = std::to_string(address.port);
+  if (getaddrinfo(host.c_str(), port.c_str(), &hints, &found) != 0 || found == nullptr) {
+    return absl::UnavailableError(
+        absl::StrCat("cannot listen on ", as_written, ": the host does not resolve"));
+  }
+  int error = 0;
+  for (const addrinfo* a = found; a != nullptr && error == 0; a = a->ai_next) {
+    const int fd = socket(a->ai_family, a->ai_socktype, a->ai_protocol);
+    if (fd < 0) continue;  // a family this machine lacks (IPv6): gRPC skips it too
+    const int one = 1;
+    (void)setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
+    if (bind(fd, a->ai_addr, a->ai_addrlen) != 0) error = errno;
+    close(fd);
+  }
+  freeaddrinfo(found);
+  if (error == 0) return absl::OkStatus();
+  const char* why = error == EADDRINUSE      ? "the port is in use (another objdb-server?)"
+                    : error == EADDRNOTAVAIL ? "the host is not an address of this machine"
+                    : error == EACCES        ? "binding it is not permitted (ports below 1024 "
+                                               "need privileges)"
+                                             : std::strerror(error);
+  return absl::UnavailableError(absl::StrCat("cannot listen on ", as_written, ": ", why));
 }
 
 }  // namespace objdb

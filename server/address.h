@@ -19,4 +19,10 @@ struct ListenAddress {
 // Host names other than "localhost" count as remote (they may resolve to any interface).
 StatusOr<ListenAddress> parseListenAddress(const std::string& address);
 
+// Whether this process could listen on `address` now: binds a socket to it (with SO_REUSEADDR,
+// as gRPC does) and closes it again. UNAVAILABLE naming the address and the reason (port in use,
+// not an address of this machine, not permitted, a host that does not resolve). Port 0 is always
+// free. A probe, not a reservation: the server still checks its own bind.
+Status probeListenAddress(const ListenAddress& address, const std::string& as_written);
+
 }  // namespace objdb

@@ -267,69 +267,6 @@ Status ObjectDatabaseService::checkSessionLimit() {
       open));
 }
 
-StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
-    const v1::SessionHeader& header, const std::shared_ptr<IngestStream>& stream) {
-  {
-    // Refused before a map is built (checked again when the session is published).
-    std::lock_guard lock(mutex_);
-    OBJDB_RETURN_IF_ERROR(checkSessionLimit());
-  }
-  OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<LiveSession> session,
-                         sessionFromHeader(header, options_.params));
-  OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
-  // The models of this session must be described as the database's are (and as the server's).
-  storage::SessionInfo server_settings;
-  server_settings.name = "(the server's --config)";
-  server_settings.params_json = paramsToJson(options_.params);
-  for (const std::vector<storage::SessionInfo>& against : {stored, {server_settings}}) {
-    if (Status same = storage::checkModelSettings(against, session->params); !same.ok()) {
-      return absl::InvalidArgumentError(absl::StrCat("header.params_json: ", same.message()));
-    }
-  }
-  OBJDB_RETURN_IF_ERROR(startPipeline(*session, options_.integration_threads));
-  if (store_->sharedByServers()) session->publish_scenes = &publish_maps_;
-  OBJDB_RETURN_IF_ERROR(leaseNewSession(session->name));
-
-  {
-    // A place under the session limit is taken before the store is written, and the store is
-    // written outside the service mutex (the query and callback threads take it too).
-    std::unique_lock lock(mutex_);
-    Status reserved = stopped_ ? absl::UnavailableError("the server is shutting down")
-                               : checkSessionLimit();
-    if (!reserved.ok()) {
-      lock.unlock();
-      releaseLease(session->name);
-      return reserved;
-    }
-    ++opening_;
-  }
-  storage::SessionInfo info;
-  info.name = session->name;
-  info.intrinsics_json = storage::intrinsicsJson(session->intrinsics);
-  info.params_json = paramsToJson(session->params);
-  // ALREADY_EXISTS when the database has a session of that name.
-  const Status begun = store_->beginSession(info).status();
-  std::unique_lock lock(mutex_);
-  --opening_;
-  if (!begun.ok() || stopped_) {
-    lock.unlock();
-    if (begun.ok()) {
-      // Stored as open while the server began to stop, whose sweep of unended sessions did not
-      // see it: it ends as interrupted now, with nothing integrated.
-      (void)store_->finishSession(session->name, storage::SessionState::kInterrupted, 0);
-    }
-    releaseLease(session->name);
-    return begun.ok() ? absl::UnavailableError("the server is shutting down") : begun;
-  }
-  session->started_unix_s = nowUnixSeconds();
-  session->stream = stream;  // before it is published: EndSession looks at the stream
-  sessions_[session->name] = session;
-  logger("server")->info("session {} opened ({}x{}, client \"{}\")", session->name,
-                         session->intrinsics.width, session->intrinsics.height,
-                         session->client_info);
-  return session;
-}
-
 namespace {
 // A database write of a session failed: logged, and its stream (if open) ends with the error.
 Status failInsert(IngestStream* stream, const Status& failed) {
@@ -484,6 +421,10 @@ Status ObjectDatabaseService::withdraw(LiveSession& session, IngestStream* strea
 
 Status ObjectDatabaseService::flush(LiveSession& session) {
   if (session.leaseLost()) return lostLease(session.name);
+  if (session.snapshot().frames_received() == 0) {
+    retireEmptySession(session);  // it never received a frame: nothing to flush, nothing kept
+    return absl::OkStatus();
+  }
   if (!session.flush_extracted) {
     for (auto& job : extractSegments(session, true, v1::SegmentExtracted::SESSION_END)) {
       session.flush_jobs.push_back(std::move(job));
@@ -507,6 +448,11 @@ Status ObjectDatabaseService::flush(LiveSession& session) {
   const int64_t frames = int64_t(session.snapshot().frames_integrated());
   const gsm::ExtractionCounts counts = session.map->extractionCounts();
   OBJDB_RETURN_IF_ERROR(store_->finishSession(session.name, storage::SessionState::kEnded, frames));
+  if (Status stored = store_->storeSessionCounters(session.name, countersJson(session.snapshot()));
+      !stored.ok()) {
+    logger("server")->warn("session {} ended, but its counters were not stored: {}", session.name,
+                           std::string(stored.message()));
+  }
   {
     std::lock_guard lock(session.mutex);
     session.state = v1::SESSION_STATE_ENDED;
@@ -595,6 +541,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
         v1::SessionSummary& summary = *response->mutable_summary();
         summary.set_session_name(name);
         summary.set_state(v1::SESSION_STATE_ENDED);
+        (void)countersFromJson(s.counters_json, summary.mutable_counters());
         summary.mutable_counters()->set_frames_integrated(uint64_t(s.frames));
         OBJDB_ASSIGN_OR_RETURN(const std::vector<uint64_t> ids, objectsOf(name));
         for (uint64_t id : ids) summary.add_object_ids(id);
@@ -639,9 +586,11 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::EndSession(grpc::CallbackServer
             name))));
         return reactor;
       }
+      session->end_queued = true;  // not resumed any more
       session->after_stream.push_back(std::move(job));
       return reactor;
     }
+    session->end_queued = true;
   }
   database_queue_->push(std::move(job));
   return reactor;

@@ -30,6 +30,7 @@
 #include <list>
 #include <map>
 #include <memory>
+#include <optional>
 #include <mutex>
 #include <set>
 #include <string>
@@ -142,11 +143,33 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   ObjectDatabaseService(const ServiceOptions& options, storage::Store* store,
                         std::unique_ptr<database::ObjectDatabase> db);
 
-  // Ingest.
-  // Checks the header, builds the session's segmenter and map, stores the session as open and
-  // publishes it (with its stream). Errors: the header's, ALREADY_EXISTS, RESOURCE_EXHAUSTED.
+  // Ingest (session_open.cpp).
+  // The session of a stream's header, as its if_exists says: a new one (beginNewSession), an
+  // existing one continued (resumeSession) or replaced (replaceSession, then a new one); fills
+  // `opened`, the stream's first response.
   StatusOr<std::shared_ptr<LiveSession>> openSession(const v1::SessionHeader& header,
-                                                     const std::shared_ptr<IngestStream>& stream);
+                                                     const std::shared_ptr<IngestStream>& stream,
+                                                     v1::SessionOpened* opened);
+  // Checks the header, builds the session's segmenter and map, stores the session as open and
+  // publishes it (with its stream). Errors: the header's, ALREADY_EXISTS (saying what the client
+  // can do), RESOURCE_EXHAUSTED.
+  StatusOr<std::shared_ptr<LiveSession>> beginNewSession(
+      const v1::SessionHeader& header, const std::shared_ptr<IngestStream>& stream);
+  // The live session of the header's name, attached to `stream` when this server holds its map
+  // and nothing feeds it (null: no session of that name, open a new one). Errors:
+  // FAILED_PRECONDITION (ended, map lost, still streaming, being ended), INVALID_ARGUMENT
+  // (intrinsics or parameters differ from the session's).
+  StatusOr<std::shared_ptr<LiveSession>> resumeSession(const v1::SessionHeader& header,
+                                                       const std::shared_ptr<IngestStream>& stream);
+  // Withdraws every segment session `name` inserted (on the database thread), forgets its live
+  // map, and frees its name (Store::retireSession). Returns the segments withdrawn, or nothing
+  // when no session has that name. FAILED_PRECONDITION while a stream feeds it, its end runs, or
+  // another server holds it.
+  StatusOr<std::optional<uint64_t>> replaceSession(const std::string& name);
+  // A session whose stream ended before any frame came (frame worker): not kept; its row is
+  // deleted on the database thread (retireEmptySession, which flush() calls too).
+  void forgetEmptySession(const std::shared_ptr<LiveSession>& session);
+  void retireEmptySession(LiveSession& session);
   // RESOURCE_EXHAUSTED when max_open_sessions sessions are not ended (mutex_ held).
   Status checkSessionLimit();
   // Ended sessions stay in memory, counters and all, for a repeated EndSession and for

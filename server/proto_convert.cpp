@@ -6,6 +6,7 @@
 #include <ctime>
 #include <unordered_map>
 
+#include <google/protobuf/util/json_util.h>
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_format.h"
@@ -466,6 +467,21 @@ std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
     toProto(r, j.mutable_evidence());
   }
   return events;
+}
+
+std::string countersJson(const v1::SessionCounters& counters) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.preserve_proto_field_names = true;
+  std::string out;
+  (void)google::protobuf::util::MessageToJsonString(counters, &out, options);
+  return out;
+}
+
+bool countersFromJson(const std::string& json, v1::SessionCounters* counters) {
+  if (json.empty()) return false;
+  google::protobuf::util::JsonParseOptions options;
+  options.ignore_unknown_fields = true;
+  return google::protobuf::util::JsonStringToMessage(json, counters, options).ok();
 }
 
 }  // namespace objdb::server

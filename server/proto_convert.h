@@ -73,4 +73,9 @@ v1::ObjectEvent removedEvent(int64_t removed, int64_t now_in, uint64_t segment_i
 std::vector<v1::ObjectEvent> objectEvents(const database::InsertReport& report,
                                           uint64_t segment_id);
 
+// A session's counters as the store keeps them (storage::SessionInfo::counters_json): JSON with
+// the proto field names. countersFromJson: false when `json` is empty or not such a JSON.
+std::string countersJson(const v1::SessionCounters& counters);
+bool countersFromJson(const std::string& json, v1::SessionCounters* counters);
+
 }  // namespace objdb::server

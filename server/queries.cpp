@@ -6,6 +6,8 @@
 #include <set>
 #include <utility>
 
+#include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/completion/scene_completion.h"
@@ -18,6 +20,18 @@
 
 namespace objdb::server {
 namespace {
+
+// A merge record's source "segment <session>/<label>" (database::ObjectDatabase's wording); false
+// for anything else ("model <id>").
+bool parseSegmentSource(const std::string& source, std::string* session, uint32_t* label) {
+  constexpr absl::string_view kPrefix = "segment ";
+  if (!absl::StartsWith(source, kPrefix)) return false;
+  const absl::string_view rest = absl::string_view(source).substr(kPrefix.size());
+  const size_t slash = rest.rfind('/');
+  if (slash == absl::string_view::npos || slash == 0) return false;
+  *session = std::string(rest.substr(0, slash));
+  return absl::SimpleAtoi(rest.substr(slash + 1), label);
+}
 
 // InsertTimingTotals.<stage>_s of each stage of database::kInsertStages (null: the API has
 // no such field; proto_convert_test checks that every stage has one).
@@ -128,6 +142,9 @@ void ObjectDatabaseService::describe(const storage::SessionInfo& stored, v1::Ses
   out->set_started_unix_s(unixSeconds(stored.started_at));
   out->set_ended_unix_s(unixSeconds(stored.ended_at));
   *out->mutable_intrinsics() = intrinsicsFromJson(stored.intrinsics_json);
+  out->set_client_info(stored.client_info);
+  // As stored; frames_integrated is what the stored map holds.
+  out->set_counters_unknown(!countersFromJson(stored.counters_json, out->mutable_counters()));
   out->mutable_counters()->set_frames_integrated(uint64_t(stored.frames));
   // A session this server runs: its live state and counters.
   if (std::shared_ptr<LiveSession> live = liveSession(stored.name)) {
@@ -137,6 +154,7 @@ void ObjectDatabaseService::describe(const storage::SessionInfo& stored, v1::Ses
     out->set_started_unix_s(live->started_unix_s);
     out->set_ended_unix_s(live->ended_unix_s);
     *out->mutable_counters() = live->counters;
+    out->set_counters_unknown(false);
   }
 }
 
@@ -246,6 +264,20 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
       *ev.mutable_t_into_merged() = toProto(m.T_target_source);
       ev.set_scene_checks(uint32_t(m.scene_checks));
       ev.set_source(m.source);
+      // One id space with the poses and the lineage: a segment by its raw segment id.
+      std::string session;
+      uint32_t label = 0;
+      int64_t object = 0;
+      if (parseSegmentSource(m.source, &session, &label)) {
+        auto row = store_->rawSegmentId({session, gsm::Label(label)});
+        if (row.ok() && *row > 0) {
+          ev.set_source_segment_id(uint64_t(*row));
+          ev.set_source(absl::StrFormat("segment %d (%s/%d)", *row, session, label));
+        }
+      } else if (absl::StartsWith(m.source, "model ") &&
+                 absl::SimpleAtoi(absl::string_view(m.source).substr(6), &object) && object > 0) {
+        ev.set_source_object_id(uint64_t(object));
+      }
     }
     if (summary.state != "active") return absl::OkStatus();  // merged: its geometry moved on
     OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const model::ObjectModel> model, store_->model(id));

@@ -115,6 +115,8 @@ Status ServerOptions::validate() const {
 StatusOr<std::unique_ptr<ObjdbServer>> ObjdbServer::start(const ServerOptions& options) {
   OBJDB_RETURN_IF_ERROR(options.validate());
   OBJDB_ASSIGN_OR_RETURN(const ListenAddress address, parseListenAddress(options.listen_address));
+  // A port that is taken stops the start before the database file is created or opened.
+  OBJDB_RETURN_IF_ERROR(probeListenAddress(address, options.listen_address));
   // The database first: a file that cannot be served stops the start before anything listens.
   OBJDB_ASSIGN_OR_RETURN(std::unique_ptr<storage::Store> store,
                          storage::openStore(options.db_path));

@@ -33,7 +33,8 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
     }
     header = stream->header;
   }
-  auto opened = openSession(header, stream);
+  v1::IngestResponse first;
+  auto opened = openSession(header, stream, first.mutable_opened());
   if (!opened.ok()) {
     std::lock_guard lock(stream->mutex);
     stream->cancelled = true;
@@ -44,6 +45,7 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
     std::lock_guard lock(stream->mutex);
     stream->session = *opened;
   }
+  stream->send(std::move(first));
   LiveSession& session = **opened;
   // Two stages, one frame apart: the segmentation thread decodes and segments frame k+1 while
   // this thread fuses frame k (and extracts, and hands segments to the database's thread).
@@ -147,6 +149,7 @@ void ObjectDatabaseService::runStream(std::shared_ptr<IngestStream> stream) {
   }
   jobs_cancelled_.fetch_add(1);
   endStreaming(*opened, true);
+  forgetEmptySession(*opened);  // when no frame came
   if (session.leaseLost()) {
     stream->finish(toGrpcStatus(lostLease(session.name)));
     return;
@@ -162,8 +165,10 @@ void ObjectDatabaseService::endStreaming(const std::shared_ptr<LiveSession>& ses
     // Stored on the database thread, so that it lands before any EndSession flush queued later.
     database_queue_->push([this, session] {
       if (session->ended() || session->leaseLost()) return;
+      const v1::SessionCounters counters = session->snapshot();
       (void)store_->finishSession(session->name, storage::SessionState::kInterrupted,
-                                  int64_t(session->snapshot().frames_integrated()));
+                                  int64_t(counters.frames_integrated()));
+      (void)store_->storeSessionCounters(session->name, countersJson(counters));
     });
   }
   std::vector<std::function<void()>> pending;
@@ -263,6 +268,8 @@ void ObjectDatabaseService::storeSavedMap(LiveSession& session, const MapCopy& c
     return;
   }
   session.map_saved_frames = copy.frames;
+  // What a crash would leave of the counters (a restart ends the session from this map).
+  (void)store_->storeSessionCounters(session.name, countersJson(session.snapshot()));
   if (publish_maps_) published_scenes_.recordPublished(ms);
   logger("server")->debug(
       "session {}: map saved after {} frames ({} blocks; copied in {:.0f} ms, written in {:.0f} "

@@ -30,7 +30,8 @@ StatusOr<std::vector<uint32_t>> parseParts(const std::string& text) {
 SessionInfo readSession(const Row& row) {
   return {.id = row.integer(0), .name = row.text(1), .intrinsics_json = row.text(2),
           .params_json = row.text(3), .started_at = row.text(4), .ended_at = row.text(5),
-          .state = sessionStateFromName(row.text(6)), .frames = row.integer(7)};
+          .state = sessionStateFromName(row.text(6)), .frames = row.integer(7),
+          .client_info = row.text(8), .counters_json = row.text(9)};
 }
 
 ModelSummary readModelSummary(const Row& row) {

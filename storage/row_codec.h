@@ -68,8 +68,15 @@ class Row {
 // Rows of both engines' queries, each read from the columns its SELECT list names (the same SQL
 // in both engines).
 inline constexpr const char* kSessionColumns =
-    "id, name, intrinsics, params, started_at, COALESCE(ended_at, ''), state, frames";
+    "id, name, intrinsics, params, started_at, COALESCE(ended_at, ''), state, frames, client, "
+    "counters";
 SessionInfo readSession(const Row& row);
+// Of sessions s: 1 when a row refers to the session (a raw segment, an observation, its scene),
+// which then cannot be deleted (Store::retireSession).
+inline constexpr const char* kSessionReferred =
+    "CASE WHEN EXISTS (SELECT 1 FROM raw_segments r WHERE r.session_id = s.id) OR "
+    "EXISTS (SELECT 1 FROM observations o WHERE o.session_id = s.id) OR "
+    "EXISTS (SELECT 1 FROM scene_maps m WHERE m.session_id = s.id) THEN 1 ELSE 0 END";
 // Of models m; without observations.
 inline constexpr const char* kModelSummaryColumns =
     "m.id, m.state, COALESCE(m.merged_into, 0), m.planar, m.num_points, m.num_keypoints, "

@@ -124,6 +124,10 @@ constexpr AddedColumn kAddedColumns[] = {
     // Parts with geometry: the part (GSM label) of each of a raw segment's voxels, as an index
     // blob aligned with raw_segments.voxels; NULL when not recorded.
     {5, "raw_segments", "voxel_parts $BLOB"},
+    // Sessions that outlive their server: the client's description and the running counters
+    // (Store::storeSessionCounters), empty when never stored.
+    {6, "sessions", "client TEXT NOT NULL DEFAULT ''"},
+    {6, "sessions", "counters TEXT NOT NULL DEFAULT ''"},
 };
 
 // `ddl` in dialect `d`, with `more` placeholders replaced too.

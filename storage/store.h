@@ -37,6 +37,11 @@ struct SessionInfo {
   std::string started_at, ended_at;  // ISO-8601 UTC; ended_at empty while open
   SessionState state = SessionState::kOpen;
   int64_t frames = 0;
+  std::string client_info;  // the client's description of itself (its header's)
+  // The server's running counters of the session as it last stored them (JSON, the server's
+  // format): at each saved map, when its stream broke, when it ended. Empty: never stored (a
+  // crash before any of those, or a database from before schema 6): unknown, not zero.
+  std::string counters_json;
 };
 
 // An open session's map as the server last saved it: its TSDF and main labels after `frames`
@@ -182,7 +187,15 @@ class Store : public database::ModelStore {
   // a session row is also created implicitly, state open, by the first data stored for it.
   virtual StatusOr<SessionInfo> beginSession(const SessionInfo& info) = 0;
   virtual Status finishSession(const std::string& name, SessionState state, int64_t frames) = 0;
+  // Stores a session's counters (SessionInfo::counters_json); NOT_FOUND: no such session.
+  virtual Status storeSessionCounters(const std::string& name, const std::string& counters_json) = 0;
   virtual StatusOr<std::vector<SessionInfo>> sessions() const = 0;
+  // Frees the name of session `name` (a replaced session, or one that never received a frame):
+  // its saved map is dropped; then its row is deleted when nothing refers to it (no raw segment,
+  // scene or observation), else it is renamed `renamed_to` and marked interrupted, a record of
+  // what was withdrawn. Returns true when the row was deleted. NOT_FOUND: no session `name`;
+  // ALREADY_EXISTS: `renamed_to` is taken.
+  virtual StatusOr<bool> retireSession(const std::string& name, const std::string& renamed_to) = 0;
 
   // Session leases (several servers on one database): the server streaming or ending a session
   // holds its lease, renewed by heartbeats; a lease not renewed within its time to live expires,

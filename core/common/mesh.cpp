@@ -3,6 +3,8 @@
 namespace objdb {
 
 void TriangleMesh::append(const TriangleMesh& other) {
+  // Nothing to add (a block without surface): the normals and colours so far stay.
+  if (other.vertices.empty() && other.triangles.empty()) return;
   const int offset = static_cast<int>(vertices.size());
   const bool keep_normals = normals.size() == vertices.size() && !other.normals.empty();
   const bool keep_colors = colors.size() == vertices.size() && !other.colors.empty();

@@ -103,11 +103,15 @@ StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
   TriangleMesh welded;
   absl::flat_hash_map<std::array<float, 3>, int, absl::Hash<std::array<float, 3>>> seen;
   std::vector<int> remap(mesh.vertices.size());
+  const bool coloured = mesh.colors.size() == mesh.vertices.size();
   for (size_t i = 0; i < mesh.vertices.size(); ++i) {
     const Eigen::Vector3f& v = mesh.vertices[i];
     const auto [it, inserted] =
         seen.emplace(std::array<float, 3>{v.x(), v.y(), v.z()}, int(welded.vertices.size()));
-    if (inserted) welded.vertices.push_back(v);
+    if (inserted) {
+      welded.vertices.push_back(v);
+      if (coloured) welded.colors.push_back(mesh.colors[i]);  // the grid's, as the mesh has
+    }
     remap[i] = it->second;
   }
   for (const auto& t : mesh.triangles) {
@@ -145,6 +149,7 @@ StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
     if (!(n.squaredNorm() > 0.5f)) continue;  // isolated vertex without a usable normal
     cloud.points.push_back(p);
     cloud.normals.push_back(n);
+    if (coloured) cloud.colors.push_back(welded.colors[i]);
   }
   return cloud;
 }
@@ -153,16 +158,21 @@ PointCloud resampleCloud(const PointCloud& cloud, float spacing) {
   struct Cell {
     Eigen::Vector3d point = Eigen::Vector3d::Zero();
     Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+    Eigen::Vector3d colour = Eigen::Vector3d::Zero();
     int count = 0;
   };
   absl::flat_hash_map<uint64_t, Cell> cells;
   const float inv = 1.0f / spacing;
   const bool with_normals = cloud.normals.size() == cloud.points.size();
+  const bool with_colours = !cloud.points.empty() && cloud.colors.size() == cloud.points.size();
   for (size_t i = 0; i < cloud.points.size(); ++i) {
     const Eigen::Vector3i c = (cloud.points[i] * inv).array().floor().cast<int>();
     Cell& cell = cells[packGridKey(c)];
     cell.point += cloud.points[i].cast<double>();
     if (with_normals) cell.normal += cloud.normals[i].cast<double>();
+    if (with_colours) {
+      cell.colour += Eigen::Vector3d(cloud.colors[i].r, cloud.colors[i].g, cloud.colors[i].b);
+    }
     ++cell.count;
   }
   std::vector<std::pair<uint64_t, const Cell*>> ordered;
@@ -178,6 +188,10 @@ PointCloud resampleCloud(const PointCloud& cloud, float spacing) {
       out.normals.push_back((cell->normal / norm).cast<float>());
     }
     out.points.push_back((cell->point / double(cell->count)).cast<float>());
+    if (with_colours) {
+      const Eigen::Vector3d c = (cell->colour / double(cell->count)).array().round();
+      out.colors.push_back(Rgb8{uint8_t(c.x()), uint8_t(c.y()), uint8_t(c.z())});
+    }
   }
   return out;
 }

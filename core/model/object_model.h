@@ -89,14 +89,16 @@ bool isMatchable(bool planar_or_structure, size_t num_points, size_t num_keypoin
 // A deep copy (models are move-only: their grid owns its blocks).
 ObjectModel cloneModel(const ObjectModel& model);
 
-// Marching-tetrahedra surface of `grid` restricted to `voxels` (vertices whose cell touches one
-// of them), with area-weighted normals pointing out of the object (toward positive distance).
+// Marching-tetrahedra surface of `grid` restricted to `voxels` (vertices whose nearest voxel is
+// one of them), with area-weighted normals pointing out of the object (toward positive distance)
+// and the grid's colours interpolated as its mesh has them (black where no colour was fused).
 // Cells with a corner lighter than min_weight are skipped. Errors: no voxels given.
 StatusOr<PointCloud> surfaceCloud(const tsdf::TsdfLayer& grid,
                                   const std::vector<tsdf::VoxelIndex>& voxels, float min_weight);
 
 // One point per cube of side `spacing`: the mean of the points in it, with their mean normal
-// (renormalised; cubes whose normals cancel out are dropped). Deterministic order.
+// (renormalised; cubes whose normals cancel out are dropped) and mean colour (when the cloud has
+// colours). Deterministic order.
 PointCloud resampleCloud(const PointCloud& cloud, float spacing);
 
 struct ModelBuildParams {

@@ -97,6 +97,9 @@ const std::vector<Migration>& schemaMigrations() {
   static const std::vector<Migration> migrations = {
       {1, "sessions, maps, raw segments, models, observations, merge records", schemaV1()},
       {2, "several servers: session leases, the models' change sequence", kSchemaV2},
+      // SQLite's schema 6.
+      {3, "sessions that outlive their server: sessions.client, sessions.counters",
+       addedColumns(kDialect, 6)},
   };
   return migrations;
 }

@@ -28,6 +28,8 @@ const std::vector<Migration>& schemaMigrations() {
       {4, "whole objects: raw_segments.parts", absl::StrCat("\n", addedColumns(kDialect, 4))},
       {5, "parts with geometry: raw_segments.voxel_parts",
        absl::StrCat("\n", addedColumns(kDialect, 5))},
+      {6, "sessions that outlive their server: sessions.client, sessions.counters",
+       absl::StrCat("\n", addedColumns(kDialect, 6))},
   };
   return migrations;
 }

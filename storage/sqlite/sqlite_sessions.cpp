@@ -43,9 +43,11 @@ StatusOr<SessionInfo> SqliteStore::beginSession(const SessionInfo& info) {
   OBJDB_ASSIGN_OR_RETURN(Statement s,
                          Statement::prepare(*writer_,
                                             "INSERT INTO sessions(name, intrinsics, params, "
-                                            "started_at, state) VALUES (?, ?, ?, %s, 'open')",
+                                            "started_at, state, client) VALUES (?, ?, ?, %s, "
+                                            "'open', ?)",
                                             kNow));
   s.bind(1, info.name).bind(2, info.intrinsics_json).bind(3, info.params_json);
+  s.bind(4, info.client_info);
   OBJDB_RETURN_IF_ERROR(duplicateSession(s.run(), info.name));
   const int64_t id = sqlite3_last_insert_rowid(writer_->get());
   OBJDB_RETURN_IF_ERROR(txn.commit());
@@ -73,6 +75,21 @@ Status SqliteStore::finishSession(const std::string& name, SessionState state, i
   return txn.commit();
 }
 
+Status SqliteStore::storeSessionCounters(const std::string& name,
+                                         const std::string& counters_json) {
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
+  OBJDB_ASSIGN_OR_RETURN(Statement s, Statement::prepare(*writer_, "UPDATE sessions SET counters "
+                                                                   "= ? WHERE name = ?"));
+  s.bind(1, counters_json).bind(2, name);
+  OBJDB_ASSIGN_OR_RETURN(Transaction txn, Transaction::begin(*writer_, Transaction::Kind::kWrite));
+  OBJDB_RETURN_IF_ERROR(annotate(s.run(), absl::StrFormat("storing the counters of session %s",
+                                                          name)));
+  if (sqlite3_changes(writer_->get()) == 0) {
+    return absl::NotFoundError(absl::StrFormat("no session %s", name));
+  }
+  return txn.commit();
+}
+
 StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(
@@ -85,6 +102,45 @@ StatusOr<std::vector<SessionInfo>> SqliteStore::sessions() const {
     out.push_back(readSession(internal::StatementRow(s)));
   }
   return out;
+}
+
+StatusOr<bool> SqliteStore::retireSession(const std::string& name,
+                                          const std::string& renamed_to) {
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
+  auto body = [&]() -> StatusOr<bool> {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_RETURN_IF_ERROR(deleteSavedMap(name));
+    OBJDB_ASSIGN_OR_RETURN(Statement referred,
+                           Statement::prepare(*writer_, "SELECT %s FROM sessions s WHERE s.name = ?",
+                                              kSessionReferred));
+    referred.bind(1, name);
+    OBJDB_ASSIGN_OR_RETURN(const bool found, referred.step());
+    if (!found) return absl::NotFoundError(absl::StrFormat("no session %s", name));
+    const bool keep = referred.columnInt(0) != 0;
+    OBJDB_RETURN_IF_ERROR(referred.reset());
+    OBJDB_ASSIGN_OR_RETURN(
+        Statement change,
+        keep ? Statement::prepare(*writer_,
+                                  "UPDATE sessions SET name = ?, state = 'interrupted', "
+                                  "ended_at = COALESCE(ended_at, %s) WHERE name = ?",
+                                  kNow)
+             : Statement::prepare(*writer_, "DELETE FROM sessions WHERE name = ?"));
+    if (keep) {
+      change.bind(1, renamed_to).bind(2, name);
+    } else {
+      change.bind(1, name);
+    }
+    OBJDB_RETURN_IF_ERROR(keep ? duplicateSession(change.run(), renamed_to) : change.run());
+    OBJDB_RETURN_IF_ERROR(txn.commit());
+    return !keep;
+  };
+  auto retired = body();
+  if (!retired.ok() && !absl::IsNotFound(retired.status()) &&
+      !absl::IsAlreadyExists(retired.status())) {
+    return annotate(retired.status(), absl::StrFormat("retiring session %s", name));
+  }
+  return retired;
 }
 
 StatusOr<std::string> SqliteStore::acquireLease(const std::string& session,

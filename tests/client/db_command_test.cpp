@@ -59,13 +59,20 @@ TEST(DbCommand, ChecksDescribesAndExports) {
   EXPECT_NE(r.out.find("s0/"), std::string::npos) << r.out;
 
   const fs::path cloud = dir / "model2.ply";
-  r = runProcess({kObjdb, "db", "export", "--db", db.string(), "--model", "2", "--out", cloud.string()});
+  r = runProcess({kObjdb, "db", "export", "--db", db.string(), "--model", "2", "--out",
+                  cloud.string(), "--what", "cloud"});
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("cloud with"), std::string::npos) << r.out;
   const auto stored = storage::SqliteStore::open(db.string()).value()->model(2).value();
   const auto read = io::readMesh(cloud);
   ASSERT_TRUE(read.ok()) << read.status();
   EXPECT_EQ(read->vertices.size(), stored->cloud.points.size());
   EXPECT_EQ(read->vertices, stored->cloud.points);
+  // The default is the mesh, as `objdb remote object` writes (issue 47).
+  r = runProcess({kObjdb, "db", "export", "--db", db.string(), "--model", "2", "--out",
+                  (dir / "mesh2.ply").string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_NE(r.out.find("model 2: mesh with"), std::string::npos) << r.out;
 
   r = runProcess({kObjdb, "db", "export", "--db", db.string(), "--model", "7", "--out", cloud.string()});
   EXPECT_EQ(r.exit_code, 1);

@@ -120,6 +120,70 @@ TEST(StreamCommand, StreamedSessionsBuildWhatIngestBuildsAndRemoteDescribesThem)
   EXPECT_TRUE(contains(r.err, "NOT_FOUND: no object 99999")) << r.err;
 }
 
+// Issue 47: a depth file of the wrong size stops the stream; once it is fixed, --resume continues
+// the session from the first frame its map does not hold, --replace streams it again, and
+// --session names it.
+TEST(StreamCommand, AStreamStoppedByABadFileIsResumedOnceTheFileIsFixedOrReplaced) {
+  testing::TempDir dir;
+  const fs::path monday = dir / "monday", other = dir / "other-camera";
+  ProcessResult r = runProcess({kObjdb, "sim", "--preset", "two-boxes", "--frames", "12",
+                                "--camera", "tango", "--out", monday.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runProcess({kObjdb, "sim", "--preset", "two-boxes", "--frames", "6", "--out",
+                  other.string()});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const fs::path bad = monday / "depth" / "000005.png", kept = dir / "000005.png";
+  fs::copy_file(bad, kept);
+  fs::copy_file(other / "depth" / "000005.png", bad, fs::copy_options::overwrite_existing);
+
+  auto server = startServer(dir / "served.sqlite");
+  ASSERT_NE(server, nullptr);
+  const std::string address = server->address();
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "000005.png is 640x480 but intrinsics are for 224x172")) << r.err;
+  EXPECT_TRUE(contains(r.err, "session monday stops before frame 5")) << r.err;
+  EXPECT_TRUE(contains(r.err, "--resume")) << r.err;
+
+  // Fixed: the same command says the name is taken and what to do.
+  fs::copy_file(kept, bad, fs::copy_options::overwrite_existing);
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string()});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "ALREADY_EXISTS")) << r.err;
+  for (const char* option : {"--resume", "--replace", "--session NAME"}) {
+    EXPECT_TRUE(contains(r.err, option)) << r.err;
+  }
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string(), "--resume"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_TRUE(contains(r.out, "resumed: its map holds")) << r.out;
+  EXPECT_TRUE(contains(r.out, "ended: 12 frames integrated")) << r.out;
+
+  // Ended: not resumed again, but replaced; its record stays under another name.
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string(), "--resume"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "FAILED_PRECONDITION: session monday has ended")) << r.err;
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string(), "--replace"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_TRUE(contains(r.out, "replaced the earlier session of this name")) << r.out;
+  EXPECT_TRUE(contains(r.out, "ended: 12 frames integrated")) << r.out;
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string(), "--session", "tue"});
+  ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
+  EXPECT_TRUE(contains(r.out, "session tue: 12 frames")) << r.out;
+  r = runProcess({kObjdb, "remote", "sessions", "--server", address});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "monday.replaced-")) << r.out;
+  EXPECT_TRUE(contains(r.out, "tue ")) << r.out;
+
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string(), other.string(),
+                  "--session", "x"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "--session names one session, but the datasets hold 2")) << r.err;
+  r = runProcess({kObjdb, "stream", "--server", address, monday.string(), "--resume",
+                  "--replace"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "--resume and --replace exclude each other")) << r.err;
+}
+
 TEST(StreamCommand, BadArgumentsAndAMissingServerAreClearErrors) {
   testing::TempDir dir;
   ProcessResult r = runProcess({kObjdb, "stream"});
@@ -140,6 +204,10 @@ TEST(StreamCommand, BadArgumentsAndAMissingServerAreClearErrors) {
   EXPECT_TRUE(contains(r.err, "--id")) << r.err;
   r = runProcess({kObjdb, "remote", "scene", "--session", "s"});
   EXPECT_EQ(r.exit_code, 2);
+  // --what without --out would be ignored: refused (issue 47).
+  r = runProcess({kObjdb, "remote", "object", "--id", "3", "--what", "cloud"});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "--what says what --out FILE.ply gets")) << r.err;
   // Nothing listens on the port of a stopped server.
   std::string address;
   {

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <thread>
@@ -130,6 +131,10 @@ TEST(ObjdbServer, SecondServerOnABusyPortFailsWithUnavailable) {
   EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_NE(second.status().message().find(first->address()), absl::string_view::npos)
       << second.status();
+  EXPECT_NE(second.status().message().find("the port is in use"), absl::string_view::npos)
+      << second.status();
+  // Refused before its database file was created (issue 47).
+  EXPECT_FALSE(std::filesystem::exists(options.db_path)) << options.db_path;
   // The first server is unaffected.
   HealthCheckResponse response;
   EXPECT_TRUE(checkHealth(first->address(), "", &response).ok());

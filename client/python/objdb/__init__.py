@@ -14,11 +14,11 @@ from objdb.client import TLS, Client, Error
 from objdb.frames import Dataset, Frame
 from objdb.geometry import Intrinsics, Mesh, PointCloud, matrix_to_pose, pose_to_matrix
 from objdb.types import (FrameAck, MergeEvidence, ObjectDetail, ObjectEvent, ObjectSummary,
-                         SegmentExtracted, SessionEnded, SessionInfo, SessionSummary)
+                         SegmentExtracted, SessionEnded, SessionInfo, SessionOpened, SessionSummary)
 
 __all__ = [
     "Client", "Error", "TLS", "Dataset", "Frame", "Intrinsics", "Mesh", "PointCloud",
     "matrix_to_pose", "pose_to_matrix", "FrameAck", "MergeEvidence", "ObjectDetail",
     "ObjectEvent", "ObjectSummary", "SegmentExtracted", "SessionEnded", "SessionInfo",
-    "SessionSummary",
+    "SessionOpened", "SessionSummary",
 ]

@@ -135,30 +135,46 @@ class Client:
     # Streaming
     # ---------------------------------------------------------------------------------------
 
-    def stream(self, source: Union[str, Path, Dataset, Iterable[Frame]], session: str, *,
+    def stream(self, source: Union[str, Path, Dataset, Iterable[Frame]],
+               session: Optional[str] = None, *,
                intrinsics: Optional[Intrinsics] = None, depth_scale: float = 0.001,
                params: Optional[str] = None, every: int = 1, end: bool = True,
                end_timeout: Optional[float] = 600.0,
                progress: Optional[Callable[[int, Optional[int]], None]] = None,
-               client_info: str = "objdb python") -> Iterator[types.Event]:
+               client_info: str = "objdb python", resume: bool = False,
+               replace: bool = False) -> Iterator[types.Event]:
         """Streams one session and yields the server's events as they come.
 
         source: a dataset folder (objdb or TUM layout; see objdb.frames), or Frame objects
         (numpy arrays; then `intrinsics` is required and uint16 depth is scaled by
-        `depth_scale` metres per unit). params: per-session parameter overrides as JSON text.
-        every: send every n-th frame of a dataset. progress(acked, total) is called on every
-        frame acknowledgement (total None when the frames are an iterator of unknown length).
+        `depth_scale` metres per unit). session: the session's name; for a dataset its folder's
+        name by default (as `objdb stream` names it), for frames required. params: per-session
+        parameter overrides as JSON text. every: send every n-th frame of a dataset.
+        progress(acked, total) is called on every frame acknowledgement (total None when the
+        frames are an iterator of unknown length).
 
-        Yields FrameAck, SegmentExtracted, ObjectEvent and SessionSummary; then, with end=True,
-        EndSession runs (it flushes the session into the database) and a SessionEnded is the
-        last event. A call that fails raises objdb.Error; a bad frame raises ValueError. Either
-        way, and when the caller stops iterating early, the stream is cancelled, never left
-        half-open: the server keeps the session INTERRUPTED for a later end_session().
+        A name the database has already is objdb.Error ALREADY_EXISTS unless resume=True
+        (continue a session whose stream broke: the frames its map holds, up to the
+        SessionOpened's last_frame_index, are skipped by their index) or replace=True (the old
+        session's segments are withdrawn and it is streamed again).
+
+        Yields SessionOpened first, then FrameAck, SegmentExtracted, ObjectEvent and
+        SessionSummary; then, with end=True, EndSession runs (it flushes the session into the
+        database) and a SessionEnded is the last event. A call that fails raises objdb.Error; a
+        bad frame raises ValueError. Either way, and when the caller stops iterating early, the
+        stream is cancelled, never left half-open: the server keeps the session INTERRUPTED for
+        a later end_session() or a resume (a session that received no frame is not kept).
         """
         if every < 1:
             raise ValueError(f"every must be >= 1 (got {every})")
+        if resume and replace:
+            raise ValueError("resume and replace exclude each other")
         if isinstance(source, (str, Path)):
             source = Dataset(source)
+        if session is None:
+            if not isinstance(source, Dataset):
+                raise ValueError("frames given as arrays need a session name (session=...)")
+            session = Path(source.root).name
         if isinstance(source, Dataset):
             intrinsics = source.intrinsics
             frames: Iterable = source.frames(every)
@@ -169,18 +185,30 @@ class Client:
             frames = source
             total = len(source) if hasattr(source, "__len__") else None
 
+        if_exists = (pb.SessionHeader.IF_EXISTS_RESUME if resume else
+                     pb.SessionHeader.IF_EXISTS_REPLACE if replace else
+                     pb.SessionHeader.IF_EXISTS_REFUSE)
         header = pb.SessionHeader(session_name=session, intrinsics=intrinsics.to_proto(),
-                                  params_json=params or "", client_info=client_info)
+                                  params_json=params or "", client_info=client_info,
+                                  if_exists=if_exists)
         failure: List[BaseException] = []
         started = threading.Event()
+        opened = threading.Event()  # the SessionOpened came (or the stream ended)
         holder = {}
 
         def requests():
             yield pb.IngestRequest(header=header)
+            opened.wait()
+            first = holder.get("opened")
+            if first is None:
+                return  # refused: the call's status says why
+            skip_to = first.last_frame_index if first.resumed else None
             try:
                 for position, frame in enumerate(frames):
                     if not isinstance(frame, pb.Frame):
                         frame = frame_to_proto(frame, position, intrinsics, depth_scale)
+                    if skip_to is not None and frame.index <= skip_to:
+                        continue  # the session's map holds it already
                     yield pb.IngestRequest(frame=frame)
             except Exception as e:  # a bad frame or an unreadable file: cancel, never half-close
                 failure.append(e)
@@ -195,6 +223,12 @@ class Client:
             try:
                 for response in call:
                     event = types.event(response)
+                    if isinstance(event, types.SessionOpened):
+                        holder["opened"] = event
+                        opened.set()
+                        if event.resumed and event.last_frame_index is not None and total:
+                            step = every if isinstance(source, Dataset) else 1
+                            total = max(0, total - (event.last_frame_index // step + 1))
                     if isinstance(event, types.FrameAck):
                         acked += 1
                         if progress is not None:
@@ -204,6 +238,8 @@ class Client:
                 if failure:
                     raise failure[0] from None
                 raise _error(e, f"Ingest of session {session}") from None
+            finally:
+                opened.set()  # a refused stream: the request generator stops
             if failure:
                 raise failure[0]
             if end:

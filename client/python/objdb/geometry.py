@@ -64,6 +64,14 @@ def matrix_to_pose(T, what: str = "pose") -> pb.Pose:
     return pb.Pose(x=T[0, 3], y=T[1, 3], z=T[2, 3], qx=x / n, qy=y / n, qz=z / n, qw=w / n)
 
 
+def _open3d():
+    try:
+        import open3d
+    except ImportError:
+        raise ImportError("to_open3d() needs the open3d package (pip install open3d)") from None
+    return open3d
+
+
 def _floats(values, columns: int) -> np.ndarray:
     return np.array(values, dtype=np.float32).reshape(-1, columns)
 
@@ -96,6 +104,16 @@ class PointCloud:
         """Writes a binary little-endian PLY file."""
         _write_ply(Path(path), self.points, self.normals, self.colors, None)
 
+    def to_open3d(self):
+        """An open3d.geometry.PointCloud with the points, normals and colours (0..1)."""
+        o3d = _open3d()
+        out = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(self.points.astype(np.float64)))
+        if self.normals is not None:
+            out.normals = o3d.utility.Vector3dVector(self.normals.astype(np.float64))
+        if self.colors is not None:
+            out.colors = o3d.utility.Vector3dVector(self.colors.astype(np.float64) / 255.0)
+        return out
+
 
 @dataclass
 class Mesh:
@@ -111,6 +129,17 @@ class Mesh:
     def from_proto(mesh: pb.Mesh) -> "Mesh":
         faces = np.array(mesh.triangles, dtype=np.uint32).reshape(-1, 3)
         return Mesh(_floats(mesh.vertices, 3), faces, *_normals_and_colors(mesh))
+
+    def to_open3d(self):
+        """An open3d.geometry.TriangleMesh with the faces, vertex normals and colours (0..1)."""
+        o3d = _open3d()
+        out = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(self.vertices.astype(np.float64)),
+                                        o3d.utility.Vector3iVector(self.faces.astype(np.int32)))
+        if self.normals is not None:
+            out.vertex_normals = o3d.utility.Vector3dVector(self.normals.astype(np.float64))
+        if self.colors is not None:
+            out.vertex_colors = o3d.utility.Vector3dVector(self.colors.astype(np.float64) / 255.0)
+        return out
 
     @staticmethod
     def concatenate(meshes) -> "Mesh":

@@ -14,9 +14,29 @@ from objdb.v1 import objdb_pb2 as pb
 
 
 def to_dict(message) -> dict:
-    """A protobuf message as a dict (proto field names, every field present)."""
-    return json_format.MessageToDict(message, preserving_proto_field_name=True,
-                                     including_default_value_fields=True)
+    """A protobuf message as a dict (proto field names, every field present). Integers stay
+    integers (protobuf's JSON form writes 64-bit ones as text)."""
+    out = json_format.MessageToDict(message, preserving_proto_field_name=True,
+                                    including_default_value_fields=True)
+    return _ints(message, out)
+
+
+def _ints(message, out: dict) -> dict:
+    from google.protobuf.descriptor import FieldDescriptor as F
+    wide = {F.TYPE_INT64, F.TYPE_UINT64, F.TYPE_SINT64, F.TYPE_FIXED64, F.TYPE_SFIXED64}
+    for f in message.DESCRIPTOR.fields:
+        if f.name not in out:
+            continue
+        value = getattr(message, f.name)
+        repeated = f.label == F.LABEL_REPEATED
+        if f.type == F.TYPE_MESSAGE and not repeated:
+            _ints(value, out[f.name])
+        elif f.type == F.TYPE_MESSAGE:
+            for sub, d in zip(value, out[f.name]):
+                _ints(sub, d)
+        elif f.type in wide:
+            out[f.name] = [int(v) for v in value] if repeated else int(value)
+    return out
 
 
 def _enum_name(enum, value: int, prefix: str) -> str:
@@ -101,6 +121,27 @@ class SessionSummary:
 
 
 @dataclass
+class SessionOpened:
+    """The stream's first event: the session the frames go to. resumed: an existing session
+    continues, holding frames up to last_frame_index (None when it holds none); replaced: an
+    existing session was withdrawn (segments_withdrawn of its segments) and this one replaces it.
+    """
+    session: str
+    resumed: bool
+    replaced: bool
+    last_frame_index: Optional[int]
+    counters: dict
+    segments_withdrawn: int
+    proto: pb.SessionOpened = field(repr=False)
+
+    @staticmethod
+    def from_proto(o: pb.SessionOpened) -> "SessionOpened":
+        return SessionOpened(o.session_name, o.resumed, o.replaced,
+                             int(o.last_frame_index) if o.has_frames else None,
+                             to_dict(o.counters), int(o.segments_withdrawn), o)
+
+
+@dataclass
 class SessionEnded:
     """The last event of Client.stream(end=True): EndSession's summary."""
 
@@ -130,6 +171,8 @@ def event(response: pb.IngestResponse) -> Event:
                            MergeEvidence.from_proto(o.evidence) if merged else None, o)
     if kind == "summary":
         return SessionSummary.from_proto(response.summary)
+    if kind == "opened":
+        return SessionOpened.from_proto(response.opened)
     raise ValueError(f"the server sent an event this client does not know ({kind})")
 
 
@@ -141,14 +184,18 @@ class SessionInfo:
     ended_unix_s: float
     client_info: str
     intrinsics: Intrinsics
-    counters: dict
+    counters: dict  # ints; None where a crash lost a counter (unknown, not zero)
     proto: pb.SessionInfo = field(repr=False)
 
     @staticmethod
     def from_proto(s: pb.SessionInfo) -> "SessionInfo":
+        counters = to_dict(s.counters)
+        if s.counters_unknown:
+            counters = {k: (v if k == "frames_integrated" and v else None)
+                        for k, v in counters.items()}
         return SessionInfo(s.session_name, _enum_name(pb.SessionState, s.state, "SESSION_STATE_"),
                            s.started_unix_s, s.ended_unix_s, s.client_info,
-                           Intrinsics.from_proto(s.intrinsics), to_dict(s.counters), s)
+                           Intrinsics.from_proto(s.intrinsics), counters, s)
 
 
 @dataclass

@@ -25,6 +25,8 @@ const objdb = {
 
   param(name) { return new URLSearchParams(window.location.search).get(name); },
   num(x) { return Number(x || 0); },  // uint64 fields arrive as strings
+  // "1 pose", "3 poses".
+  counted(x, noun, plural) { const n = Number(x || 0); return `${n} ${n === 1 ? noun : (plural || noun + "s")}`; },
   fixed(x, digits) { return Number(x || 0).toFixed(digits); },
   esc(text) {
     return String(text).replace(/[&<>"']/g, c => ({"&": "&amp;", "<": "&lt;", ">": "&gt;",

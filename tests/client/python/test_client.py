@@ -54,12 +54,15 @@ def test_a_dataset_streams_and_its_objects_come_back_where_the_scene_saw_them(se
         acks = [e for e in events if isinstance(e, objdb.FrameAck)]
         assert len(acks) == 30 and all(a.accepted for a in acks)
         assert [a.index for a in acks] == list(range(30))
-        assert acks[-1].counters["session"]["frames_integrated"] == "30"
+        assert acks[-1].counters["session"]["frames_integrated"] == 30  # an int, not "30"
         assert seen[-1] == (30, 30) and len(seen) == 30
         assert isinstance(events[-1], objdb.SessionEnded)
         assert events[-1].summary.state == "ended"
         # The segments still live at the end go in with EndSession: its summary counts them.
-        created = int(events[-1].summary.counters["objects_created"])
+        assert isinstance(events[0], objdb.SessionOpened) and events[0].session == "boxes"
+        assert not events[0].resumed and not events[0].replaced
+        created = events[-1].summary.counters["objects_created"]
+        assert isinstance(created, int)
         assert created >= 1, "the two boxes make at least one object"
         assert events[-1].summary.object_ids
 
@@ -90,6 +93,9 @@ def test_a_dataset_streams_and_its_objects_come_back_where_the_scene_saw_them(se
             assert o.cloud.points.shape[1] == 3 and len(o.cloud.points) > 50
             assert o.cloud.normals.shape == o.cloud.points.shape
             assert np.allclose(np.linalg.norm(o.cloud.normals, axis=1), 1.0, atol=1e-3)
+            # The boxes are coloured: so is the cloud (issue 47: colors came as None).
+            assert o.cloud.colors is not None and o.cloud.colors.shape == o.cloud.points.shape
+            assert o.cloud.colors.dtype == np.uint8 and o.cloud.colors.max() > 0
             assert o.mesh.faces.max() < len(o.mesh.vertices)
             # Known answer: the model's cloud, placed at its pose, lies on the scene's surface.
             T = o.poses[0]
@@ -112,7 +118,7 @@ def test_a_dataset_streams_and_its_objects_come_back_where_the_scene_saw_them(se
         assert no_geometry.mesh is None and no_geometry.cloud is None
 
         stats = db.stats()
-        assert int(stats["insert_timings"]["inserts"]) >= created
+        assert stats["insert_timings"]["inserts"] >= created
 
 
 def plane_frames(n, width=64, height=48, depth_m=1.0, dtype=np.float32):
@@ -184,6 +190,58 @@ def test_a_bad_frame_is_a_value_error_and_the_stream_is_cancelled_not_left_open(
             stream_all(db, plane_frames(2), "no-intrinsics")
 
 
+def test_a_broken_stream_is_resumed_and_an_ended_one_replaced(server, two_boxes):
+    with objdb.Client(server.address) as db:
+        # No session name: the dataset folder's, as `objdb stream` names it.
+        events = db.stream(two_boxes)
+        for event in events:
+            if isinstance(event, objdb.FrameAck) and event.index == 9:
+                break
+        events.close()  # the client goes away
+        assert wait_for_state(db, "two-boxes", "interrupted")
+        with pytest.raises(objdb.Error, match="ALREADY_EXISTS") as taken:
+            stream_all(db, two_boxes, None)
+        assert "--resume" in str(taken.value) and "--replace" in str(taken.value)
+
+        seen = []
+        events = list(db.stream(two_boxes, resume=True, progress=lambda a, t: seen.append(t)))
+        opened = events[0]
+        assert isinstance(opened, objdb.SessionOpened) and opened.resumed
+        assert opened.last_frame_index >= 9
+        assert opened.counters["frames_integrated"] == opened.last_frame_index + 1
+        acks = [e for e in events if isinstance(e, objdb.FrameAck)]
+        assert [a.index for a in acks] == list(range(opened.last_frame_index + 1, 30))
+        assert all(a.accepted for a in acks), [a.reason for a in acks]
+        assert seen[-1] == len(acks)  # the progress total counts the frames sent
+        assert events[-1].summary.counters["frames_integrated"] == 30
+
+        with pytest.raises(objdb.Error, match="FAILED_PRECONDITION.*has ended"):
+            stream_all(db, two_boxes, None, resume=True)
+        events = stream_all(db, two_boxes, None, replace=True)
+        assert events[0].replaced and events[0].segments_withdrawn >= 1
+        assert events[-1].summary.counters["frames_integrated"] == 30
+        names = [s.name for s in db.sessions()]
+        assert names[-1] == "two-boxes" and names[0].startswith("two-boxes.replaced-")
+        with pytest.raises(ValueError, match="exclude each other"):
+            stream_all(db, two_boxes, None, resume=True, replace=True)
+        with pytest.raises(ValueError, match="need a session name"):
+            stream_all(db, plane_frames(2), None, intrinsics=K)
+
+
+def test_a_stream_refused_before_its_first_frame_keeps_no_session(server):
+    frames = plane_frames(3)
+    frames[0].depth = np.zeros((10, 10), np.float32)
+    with objdb.Client(server.address) as db:
+        with pytest.raises(ValueError, match=r"frame 0: depth has shape"):
+            stream_all(db, frames, "never", intrinsics=K)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and db.sessions():
+            time.sleep(0.1)
+        assert db.sessions() == []
+        # The name is free.
+        assert stream_all(db, plane_frames(2), "never", intrinsics=K)[-1].summary.state == "ended"
+
+
 def test_stopping_early_cancels_the_stream(server, two_boxes):
     with objdb.Client(server.address) as db:
         events = db.stream(two_boxes, session="early")
@@ -242,6 +300,42 @@ def test_a_token_server_needs_the_token(token_server):
         assert db.sessions() == []
     with pytest.raises(ValueError, match="clear text"):
         objdb.Client("192.0.2.1:50051", token=token_server.token)
+
+
+class _FakeOpen3d:
+    """Records what to_open3d() hands to open3d (the test does not need open3d installed)."""
+
+    class utility:
+        Vector3dVector = staticmethod(lambda a: ("3d", np.asarray(a)))
+        Vector3iVector = staticmethod(lambda a: ("3i", np.asarray(a)))
+
+    class geometry:
+        class PointCloud:
+            def __init__(self, points):
+                self.points, self.normals, self.colors = points, None, None
+
+        class TriangleMesh:
+            def __init__(self, vertices, triangles):
+                self.vertices, self.triangles = vertices, triangles
+                self.vertex_normals = self.vertex_colors = None
+
+
+def test_clouds_and_meshes_hand_over_to_open3d(monkeypatch):
+    cloud = objdb.PointCloud(np.array([[0, 0, 1], [1, 0, 1]], np.float32),
+                             np.array([[0, 0, -1], [0, 0, -1]], np.float32),
+                             np.array([[255, 0, 0], [0, 0, 255]], np.uint8))
+    mesh = objdb.Mesh(cloud.points.copy(), np.array([[0, 1, 1]], np.uint32), None, cloud.colors)
+    monkeypatch.setitem(sys.modules, "open3d", _FakeOpen3d)
+    o = cloud.to_open3d()
+    assert o.points[0] == "3d" and np.array_equal(o.points[1], cloud.points)
+    assert np.array_equal(o.normals[1], cloud.normals)
+    assert np.allclose(o.colors[1], [[1, 0, 0], [0, 0, 1]])
+    m = mesh.to_open3d()
+    assert m.triangles[0] == "3i" and m.triangles[1].tolist() == [[0, 1, 1]]
+    assert m.vertex_normals is None and np.allclose(m.vertex_colors[1][1], [0, 0, 1])
+    monkeypatch.setitem(sys.modules, "open3d", None)  # not installed
+    with pytest.raises(ImportError, match="pip install open3d"):
+        cloud.to_open3d()
 
 
 def test_a_tum_folder_reads_as_the_same_frames_and_streams(server, two_boxes, tmp_path):

@@ -119,10 +119,17 @@ def test_every_page_loads_and_draws(lounge, browser):
 
     gallery = load(browser, f"{lounge.url}/objects.html", "objects")
     _, listed = get_json(f"{lounge.url}/api/objects?page_size=1000")
-    count = len(listed["objects"])
+    objects = [o for o in listed["objects"] if not o.get("planar")]
+    count = len(objects)
     assert count > 5
     cards = browser.find_elements("css selector", ".card")
-    assert len(cards) == count
+    assert len(cards) == count  # objects first: planar pieces only when asked
+    planar_count = len(listed["objects"]) - count
+    if planar_count:
+        summary = browser.find_element("css selector", "#summary").text
+        assert f"also show {planar_count} planar piece" in summary, summary
+    load(browser, f"{lounge.url}/objects.html?planar=1", "objects-with-planar")
+    assert len(browser.find_elements("css selector", ".card")) == len(listed["objects"])
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and browser.execute_script(
             "return [...document.images].some(i => !i.complete);"):

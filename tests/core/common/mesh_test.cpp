@@ -56,6 +56,23 @@ TEST(TriangleMesh, AppendOffsetsIndices) {
   EXPECT_TRUE(a.validate().ok());
 }
 
+// Appending a mesh with nothing in it (a block without surface) keeps the colours and normals
+// (it used to drop them: every object's surface cloud came without colours).
+TEST(TriangleMesh, AppendingAnEmptyMeshKeepsColoursAndNormals) {
+  TriangleMesh a = unitCube();
+  a.computeVertexNormals();
+  a.colors.assign(a.vertices.size(), Rgb8{1, 2, 3});
+  a.append(TriangleMesh());
+  EXPECT_EQ(a.colors.size(), a.vertices.size());
+  EXPECT_EQ(a.normals.size(), a.vertices.size());
+  TriangleMesh b = unitCube();
+  b.colors.assign(b.vertices.size(), Rgb8{4, 5, 6});
+  a.append(b);  // b has no normals: they go; both have colours: they stay
+  EXPECT_EQ(a.colors.size(), a.vertices.size());
+  EXPECT_TRUE(a.normals.empty());
+  EXPECT_TRUE(a.validate().ok());
+}
+
 TEST(TriangleMesh, ValidateCatchesBadIndices) {
   TriangleMesh mesh = unitCube();
   mesh.triangles[5] = Eigen::Vector3i(0, 8, 1);

@@ -47,6 +47,44 @@ TEST(SurfaceCloud, SphereSurfaceWithOutwardNormals) {
   EXPECT_LT(worst_angle, 10.0);    // and normals point outward
 }
 
+// The cloud carries the grid's colours (issue 47: every object's cloud came without them): a
+// sphere red on one side, blue on the other.
+TEST(SurfaceCloud, CarriesTheGridsColours) {
+  const Eigen::Vector3f centre(0.0f, 0.0f, 0.0f);
+  const float radius = 0.15f;
+  const Eigen::Vector3f reach = Eigen::Vector3f::Constant(radius + 0.05f);
+  auto grid = sdfGrid(sphereSdf(centre, radius), centre - reach, centre + reach, kVoxel,
+                      3 * kVoxel);
+  std::vector<tsdf::BlockIndex> blocks;
+  for (const auto& [index, block] : grid.layer.blocks()) blocks.push_back(index);
+  const int vps = grid.layer.voxelsPerSide();
+  for (const auto& b : blocks) {
+    for (int z = 0; z < vps; ++z) {
+      for (int y = 0; y < vps; ++y) {
+        for (int x = 0; x < vps; ++x) {
+          const tsdf::VoxelIndex v = b * vps + tsdf::VoxelIndex(x, y, z);
+          tsdf::TsdfVoxel* voxel = grid.layer.voxel(v);
+          const bool left = grid.layer.voxelCenter(v).x() < centre.x();
+          voxel->color = left ? Rgb8{200, 10, 10} : Rgb8{10, 10, 200};
+        }
+      }
+    }
+  }
+  auto cloud = surfaceCloud(grid.layer, grid.surface_voxels, 3.0f);
+  ASSERT_TRUE(cloud.ok()) << cloud.status();
+  ASSERT_EQ(cloud->colors.size(), cloud->points.size());
+  size_t checked = 0;
+  for (size_t i = 0; i < cloud->points.size(); ++i) {
+    const float x = cloud->points[i].x() - centre.x();
+    if (std::abs(x) < 2 * kVoxel) continue;  // near the seam colours mix
+    const Rgb8 want = x < 0 ? Rgb8{200, 10, 10} : Rgb8{10, 10, 200};
+    ASSERT_EQ(cloud->colors[i].r, want.r) << i;
+    ASSERT_EQ(cloud->colors[i].b, want.b) << i;
+    ++checked;
+  }
+  EXPECT_GT(checked, 1000u);
+}
+
 TEST(SurfaceCloud, KeepsOnlyTheSegmentsVoxels) {
   // Two spheres in one grid; the segment is the first one's voxels only.
   const Eigen::Vector3f a(0, 0, 0), b(0.5f, 0, 0);
@@ -279,6 +317,15 @@ TEST(ResampleCloud, OnePointPerCubeWithMeanPositionAndNormal) {
   EXPECT_TRUE(out.points[first].isApprox(Eigen::Vector3f(0.002f, 0.003f, 0.004f), 1e-5f));
   EXPECT_TRUE(out.normals[first].isApprox(Eigen::Vector3f(1, 1, 0).normalized(), 1e-5f));
   EXPECT_TRUE(out.normals[1 - first].isApprox(Eigen::Vector3f(0, 0, 1)));
+  EXPECT_TRUE(out.colors.empty());  // none given
+  // Colours: the mean of the cube's.
+  cloud.colors = {{10, 20, 30}, {20, 41, 60}, {200, 0, 0}};
+  const PointCloud coloured = resampleCloud(cloud, 0.01f);
+  ASSERT_EQ(coloured.colors.size(), 2u);
+  EXPECT_EQ(coloured.colors[first].r, 15);
+  EXPECT_EQ(coloured.colors[first].g, 31);  // 30.5 rounds up
+  EXPECT_EQ(coloured.colors[first].b, 45);
+  EXPECT_EQ(coloured.colors[1 - first].r, 200);
   // Opposite normals cancel: that cube has no usable normal and is dropped.
   PointCloud flat;
   flat.points = {{0.001f, 0, 0}, {0.002f, 0, 0}};
