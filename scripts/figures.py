@@ -121,7 +121,7 @@ def main(argv) -> int:
     rows, notes = [], []
     with tempfile.TemporaryDirectory(prefix="objdb-figures-") as tmp:
         tmp = Path(tmp)
-        evals = []  # (name, command prefix, datasets)
+        evals = []  # (name, datasets, the command that made them)
         sim = [("synthetic lounge (3 sessions, Tango)", "lounge")]
         if not args.short:
             sim.append(("synthetic kitchen (2 sessions, Kinect-like)", "kitchen"))
@@ -132,20 +132,21 @@ def main(argv) -> int:
                 command += ["--frames", "40"]
                 name = name.replace("3 sessions", "3 sessions of 40 frames")
             run(command, tmp / f"sim-{preset}.log")
-            evals.append((name, [out]))
+            made = " ".join(str(c) for c in command[1:]).replace(str(tmp) + "/", "")
+            evals.append((name, [out], f"objdb {made}; "))
         if not args.short:
             for name, folders in REAL:
                 paths = [data / f for f in folders]
                 if all(p.is_dir() for p in paths):
-                    evals.append((name, paths))
+                    evals.append((name, paths, ""))
                 else:
                     notes.append(f"{name}: not measured ({paths[0]} absent)")
-        for i, (name, paths) in enumerate(evals):
+        for i, (name, paths, made) in enumerate(evals):
             output = run([objdb, "eval", *paths, "--db", tmp / f"eval-{i}.sqlite"],
                          tmp / f"eval-{i}.log")
             f = figures(output)
             f["name"] = name
-            f["command"] = "objdb eval " + " ".join(
+            f["command"] = made + "objdb eval " + " ".join(
                 str(p).replace(str(data), "../shared/data").replace(str(tmp) + "/", "")
                 for p in paths)
             rows.append(f)
