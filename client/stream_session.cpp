@@ -157,7 +157,8 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
     if (frame->color) *f.mutable_color() = server::encodeColor(*frame->color);
     open = stream->Write(request);
   }
-  if (!load_error.ok()) context.TryCancel();
+  // Also after a frame that could not be read: the frames sent are fused (nothing sent is lost)
+  // and the session stays open, for --resume once the file is fixed.
   stream->WritesDone();
   reader.join();
   const grpc::Status status = stream->Finish();
@@ -165,9 +166,10 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
   if (!load_error.ok()) {
     const int rc = reportError(command, load_error);
     std::fprintf(stderr,
-                 "objdb %s: session %s stops before frame %zu (the server keeps its map for a "
-                 "while); once the file is fixed, the same command with --resume continues it "
-                 "from there, or --replace streams it again\n",
+                 "objdb %s: session %s stops before frame %zu, open on the server with the "
+                 "frames before it (until EndSession or the server's --auto-end-s); once the "
+                 "file is fixed, the same command with --resume continues it from there, or "
+                 "--replace streams it again\n",
                  command, name.c_str(), failed_frame);
     return rc;
   }

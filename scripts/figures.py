@@ -4,7 +4,7 @@ protocol, in process) on the synthetic lounge and kitchen, and on every real seq
 ../shared/data that is present, the sensor-rate benchmark on a real VGA sequence, and the
 README's first command (scripts/demo.sh, with the build done; it writes data/). The page
 says the date, the commit and the machine; the README and the docs link to it instead of keeping
-copies of measured figures.
+copies of measured figures (scripts/check_docs.py fails on a copy that differs).
 
     scripts/figures.py [--short] [--out FILE] [--build DIR] [--data DIR]
 

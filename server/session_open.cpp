@@ -126,12 +126,19 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::resumeSession(
     session->ended_unix_s = 0.0;
     session->stream = stream;
   }
-  // Behind endStreaming's "interrupted" write, which the queue ran or will run first.
-  database_queue_->push([this, session] {
-    if (session->ended() || session->leaseLost()) return;
-    (void)store_->finishSession(session->name, storage::SessionState::kOpen,
-                                int64_t(session->snapshot().frames_integrated()));
+  // Behind endStreaming's "interrupted" write, which the queue ran or will run first. Waited for:
+  // a save of the idle map the janitor queued before (it reads the map on the database thread)
+  // must be done before this stream's frame worker writes to the map again; with `streaming`
+  // set, the janitor queues no other.
+  std::promise<void> reopened;
+  database_queue_->push([this, session, &reopened] {
+    if (!session->ended() && !session->leaseLost()) {
+      (void)store_->finishSession(session->name, storage::SessionState::kOpen,
+                                  int64_t(session->snapshot().frames_integrated()));
+    }
+    reopened.set_value();
   });
+  reopened.get_future().wait();
   logger("server")->info("session {} resumed after frame {} ({} frames integrated, client \"{}\")",
                          name, session->last_index, session->snapshot().frames_integrated(),
                          header.client_info());

@@ -14,9 +14,8 @@ namespace objdb {
 // the minimum segment size are given for 640×480 and scaled to other resolutions.
 struct SegmentationParams {
   // 3×3 hole-filling passes (0 = off): pinholes whose neighbours lie on one surface are closed,
-  // holes on depth edges stay (fillDepthHoles). 1 (was 0): a RealSense's registered depth has a
-  // grid of pinholes that left 0 segments on the desk box and the shelf bin; on the noisy VGA
-  // lounge coverage 0.584 → 0.605, under-segmentation 0.76 → 0.90 %, +0.3 ms per frame.
+  // holes on depth edges stay (fillDepthHoles). 1: a RealSense's registered depth has a grid of
+  // pinholes that otherwise splits every surface into pixel-sized regions.
   int fill_holes_iterations = 1;
   int normal_window_px = 13;                  // side of the normal-estimation window
   float normal_max_relative_distance = 0.05f; // neighbours used only if |Δz| < this · z
@@ -25,8 +24,9 @@ struct SegmentationParams {
   int convexity_window_px = 5;                // min-convexity window
   float convexity_threshold = 0.97f;          // below → concave boundary
   float convexity_offset_m = 0.0005f;         // offsets above −this along the normal are convex
-  // Ours: + this · z² (sensor noise grows about with depth²; 0..0.01). 0.0002 measured on the lounge (noisy VGA
-  // coverage 0.573 → 0.585, under-segmentation 0.57 → 0.50 %); 0.0004 over-merges clean frames.
+  // Ours: + this · z² per m² (the sensor's noise grows about with depth², so a surface seen from
+  // farther needs a larger offset to stay convex; 0..0.01). Twice the default over-merges clean
+  // frames.
   float convexity_offset_per_m2 = 0.0002f;
   int min_segment_px = 500;                   // smaller regions are dropped (VGA; scale for others)
   float max_label_growth_distance_m = 0.05f;  // edge pixels join a neighbour label within this
@@ -43,10 +43,10 @@ struct TsdfParams {
   float min_ray_length_m = 0.1f;    // depth below this is skipped (counted)
   float max_weight = 1000.0f;       // voxel weights saturate here
   float mesh_min_weight = 3.0f;     // voxels lighter than this are not meshed
-  // Ours. Free space in front of the band: blocks this far in front of each measured surface
-  // are allocated too, so their voxels are observed as empty (+truncation); scene completion then
-  // fills nothing there. 0.15 m (default) keeps 89 % of what completion adds on the lounge's true
-  // surfaces instead of 65 % (objdb eval; docs/database.md); 0 = only the band. 0..2 m.
+  // Ours. Free space in front of the band, metres: blocks this far in front of each measured
+  // surface are allocated too, so their voxels are observed as empty (+truncation); scene
+  // completion then fills nothing there (it must not fill space a camera saw through). 0 = only
+  // the band. 0..2 m.
   float carve_distance_m = 0.15f;
   float truncationDistance() const { return truncation_voxels * voxel_size_m; }
   Status validate() const;
@@ -61,10 +61,9 @@ struct GsmParams {
   int merge_min_frames = 2;              // frames of evidence before two labels merge
   // Ours: besides merge_min_frames, the frames in which one segment covered both labels must be
   // at least this share of the frames that saw them touching (in the others each was claimed by
-  // a segment of its own). 0 = the paper's rule. 0.5 measured on the lounge: a helmet and a
-  // container standing on the round table no longer merge into its label after two noisy frames
-  // (that segment was 57 % table, now 90 %); GSM label quality unchanged (gsm_eval), database
-  // recall 55 of 92 (was 53 of 90), 0 erroneous merges, completion precision 28 % → 38 %.
+  // a segment of its own). 0 = the paper's rule. 0.5: two labels merge only when one segment
+  // covered both in most of the frames that saw them touch, so two noisy frames do not glue an
+  // object standing on another to it.
   float merge_min_joint_share = 0.5f;
   int extraction_age_frames = 10;        // a label untouched this long is extracted
   // Whole objects (ours; core/gsm/objects.h): above the convex labels, the labels that
@@ -116,12 +115,10 @@ struct GsmParams {
   // Two labels also connect across a gap the cameras never saw into, up to this long, straight
   // along the normal of the structure the lower one stands on, when the upper one's object
   // floats (core/gsm/objects.h): a pedestal under a seat or a table top, whose top is in their
-  // shadow. 0 = off. Measured on the lounge
-  // (objdb eval, three sessions): 0.2 m joins the chairs' pedestals but leaves the round tables'
-  // in two sessions apart (2.0 models per table, recall 85 %, completion +5.3); 0.3 m joins
-  // them too (1.0, 87–89 %, +5.5; 0 erroneous merges both). Only an object that floats (touches
-  // no structure, rests on no support) is joined so: a chair pushed under a desk that stands
-  // on its own legs stays apart (SUN3D fragment 1 has one).
+  // shadow. Metres; 0 = off. 0.3 m: the column of a table or chair pedestal under its top
+  // (furniture heights put it between 0.2 and 0.5 m). Only an object that floats (touches no
+  // structure, rests on no support) is joined so: a chair pushed under a desk that stands on its
+  // own legs stays apart.
   float object_shadow_gap_m = 0.3f;
   int object_update_frames = 10;
   // The room structure is found again every this many frames (and at a flush); the regroupings
@@ -130,19 +127,17 @@ struct GsmParams {
   int structure_update_frames = 50;
   // An object is extracted only once one of its labels was voted for in at least this many
   // frames (ours): a label seen in one frame alone is flicker at a segment's border (a sliver the
-  // association did not tie to its neighbour), which the next frames' votes take back. Replaying
-  // SUN3D fragment 1 twenty times through the server, 371 of 507 new objects were such labels
-  // (48 voxels on average); they cost a database insert and a withdrawal each. At a flush every
-  // object is extracted: what still stands then is a surface seen once. 1 = every label.
+  // association did not tie to its neighbour), which the next frames' votes take back; each
+  // would cost a database insert and a withdrawal. At a flush every object is extracted: what
+  // still stands then is a surface seen once. 1 = every label.
   int object_min_frames = 2;
   // An object extracted before, of the same parts, is extracted again only when its voxel set
   // changed by at least this share since (the share of the larger of its two voxel sets, then
   // and now, that the other lacks; ours). Each re-extraction is a full database insert (surface, features, matching, checks); a
   // surface seen again from where it was seen before gains or loses a few voxels along its
   // outline and nothing else. The change is measured against the last extraction, so slow
-  // growth adds up until it counts. 0 = re-extract on every update (the paper). Measured
-  // 2026-12-07 (docs/gsm.md, "Extraction"): the SUN3D replay re-extracted 340 objects, 304 of
-  // them changed by less than 5 %, 314 by less than 10 %.
+  // growth adds up until it counts. 0 = re-extract on every update (the paper). 0.1: a tenth of
+  // an object's voxels is more than the outline a view adds (docs/gsm.md, "Extraction").
   float reextract_min_change = 0.1f;
   Status validate() const;
 };
@@ -197,9 +192,7 @@ struct KeypointParams {
   int iss_min_neighbors = 5;             // k_NN^min (ISS)
   // Ours, not in table I: also one keypoint per cube of this side (the cloud point nearest the
   // cube's centre), so that small or smooth segments get enough correspondences; 0 = off.
-  // 5 cm (was 0) with matching.ransac_inlier_distance_m 4 cm, measured on the lounge with the
-  // paper's thresholds: 59 % of repeated objects' segments with their kind (was 49 %), 0
-  // erroneous merges, database stage 24.2 s (was 11.3 s).
+  // Metres; 5 cm gives a chair-sized segment hundreds of keypoints at any voxel size.
   float uniform_spacing_m = 0.05f;
   Status validate() const;
 };
@@ -208,10 +201,8 @@ struct KeypointParams {
 struct DescriptorParams {
   float fpfh_radius_m = 0.10f;  // r
   // Ours: the histograms are built over the model cloud resampled to this spacing (keypoints
-  // stay where they are); 0 = over the model cloud itself. FPFH's cost grows with the square of
-  // the points within r. 2 cm (was 0) measured on the lounge: the same recall (39 of 82) and 0
-  // erroneous merges, database stage 17.9 s instead of 22.8 s, worst insert into 1,000 models
-  // 0.45 s instead of 0.86 s.
+  // stay where they are); 0 = over the model cloud itself. Metres. FPFH's cost grows with the
+  // square of the points within r; at 2 cm a 10 cm radius still holds some 75 points.
   float surface_spacing_m = 0.02f;
   Status validate() const;
 };
@@ -229,9 +220,7 @@ struct MatchingParams {
   // source surface points / sampled points ≥ this, or the candidate is rejected before ICP.
   float coarse_min_agreement = 0.0f;
   float icp_max_correspondence_m = 0.05f;  // ICP pairs farther apart are ignored
-  // 15 iterations (was 30) and 400 source points (was 1500, then 800), measured on the lounge:
-  // recall 40 of 82 (was 39), 0 erroneous merges, database stage 11.3 s instead of 17.9 s; with
-  // bench/configs/recall.json 73 of 90 (was 72), 27.1 s instead of 43.6 s.
+  // ICP starts from the RANSAC transform, already within a few centimetres: 15 iterations settle.
   int icp_iterations = 15;
   // The source cloud is thinned to this for ICP.
   int icp_max_source_points = 400;
@@ -250,33 +239,29 @@ struct MergingParams {
   // Ours (scene completion): a placed model fills only the scene voxels within this many voxels
   // of the model's own surface voxels. Beyond them a model grid holds the truncation band of
   // whatever surrounded each observation (floor, walls, neighbours), which is not the object.
-  // 1 measured on the lounge: 28 % of the added surface on a true surface (27 % unrestricted),
-  // completion gain +1.3 points (+1.4). At most 4: the region has (2 · margin + 1)³ voxels per
-  // surface voxel, and a truncation band of 3 voxels is covered at 3.
+  // At most 4: the region has (2 · margin + 1)³ voxels per surface voxel, and a truncation band
+  // of 3 voxels is covered at 3.
   int completion_margin_voxels = 1;
   // Ours: a registration that the grids accept is still rejected when the two models' colours
   // disagree where both saw the surface (matching::compareColours): the median chromaticity
   // distance of at least colour_min_pairs coloured surface-voxel pairs above colour_max_distance.
   // Shape alone cannot tell a chair's back from a sofa's arm, nor a fire extinguisher from a gas
   // cylinder. Models without colour (sessions streamed without it, dark surfaces) are judged on
-  // geometry alone. 0 turns the check off. Measured (docs/database.md, "Colour as evidence"):
-  // same-kind candidates on the lounge at most 0.078, wrong SUN3D candidates 0.147-0.485; 30
-  // pairs because a wrong real candidate (a chair onto a sofa's arm) shared only 62.
+  // geometry alone. 0 turns the check off. The default lies between the distances of same-kind
+  // and of wrong candidates (docs/database.md, "Colour as evidence").
   float colour_max_distance = 0.12f;
   int colour_min_pairs = 30;
-  // Ours: a real sweep is noisier than the paper's thresholds allow (SUN3D's depth disagrees with
-  // its own map by twice the Kinect-class σ(z), poses included). The GSM measures each session's
-  // noise as a multiple s of σ(z) (gsm::SurfaceNoise; the lounge measures about 1). A new segment
-  // seen from depth z in a session with s > 1 may pass the model checks with e*_ICP and e*_TSDF
-  // each raised by noise_sigmas · (s − 1) · σ(z) (ModelParams::depthNoise), but only where colour
-  // confirms the match: at least colour_min_pairs pairs of chromatic voxels (both farther than
+  // Ours: a real sweep can be noisier than the paper's thresholds allow (its depth may disagree
+  // with its own map by twice the Kinect-class σ(z), poses included). The GSM measures each
+  // session's noise as a multiple s of σ(z) (gsm::SurfaceNoise; a synthetic session with the
+  // sensor model's noise measures about 1). A new segment seen from depth z in a session with
+  // s > 1 may pass the model checks with e*_ICP and e*_TSDF each raised by
+  // noise_sigmas · (s − 1) · σ(z) (ModelParams::depthNoise), but only where colour confirms the
+  // match: at least colour_min_pairs pairs of chromatic voxels (both farther than
   // matching::kMinSaturation from grey) agree within colour_max_distance. Grey or colourless
   // surfaces, joins of two stored models, and every check against a scene keep the paper's
   // thresholds. 0 turns the loosening off, the default: where the paper's thresholds refuse a
-  // pair, the safe answer is no merge. Measured 2026-12-07 through the server: on SUN3D the one
-  // merge it admitted was a sofa's arm onto a chair's seat (e_TSDF 3.4 cm, colour confirming), the
-  // lounge and the kitchen preset never reach it (their scale is about 1); earlier it had merged
-  // SUN3D fragment 1's two identical chairs (docs/database.md, "Loosening").
+  // pair, the safe answer is no merge (docs/database.md, "Loosening").
   float noise_sigmas = 0.0f;
   double minOverlapVoxels(double voxel_size_m) const;
   Status validate() const;
@@ -291,11 +276,9 @@ struct DatabaseParams {
   int prefilter_min_votes = 3;
   // The nearest descriptors are searched approximately when > 0: FLANN's (1 + ε) bound in each
   // kd-tree (deterministic). An exact search (0) in 33-D FPFH space visits most of the tree: its
-  // time grows with the stored descriptors. ε 2 kept all the exact vote's candidates on the
-  // lounge and cut the prefilter at 10,000 chair models about 10-fold (docs/database.md).
+  // time grows with the stored descriptors (docs/database.md, "Scale").
   float prefilter_epsilon = 2.0f;
-  // 16 (was 32) measured: the same recall on the lounge (~10 candidates per insert on average);
-  // the worst insert into a database of 1,000 models drops below 1 s.
+  // The candidates registered per insert at most: bounds the insert's time.
   int max_candidates = 16;
   // Candidates are evaluated in waves of `threads`, most voted first; once this many have been
   // accepted no further wave starts (0: evaluate all). Bounds the insert time when many stored

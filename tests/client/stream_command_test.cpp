@@ -142,7 +142,7 @@ TEST(StreamCommand, AStreamStoppedByABadFileIsResumedOnceTheFileIsFixedOrReplace
   r = runProcess({kObjdb, "stream", "--server", address, monday.string()});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.err, "000005.png is 640x480 but intrinsics are for 224x172")) << r.err;
-  EXPECT_TRUE(contains(r.err, "session monday stops before frame 5")) << r.err;
+  EXPECT_TRUE(contains(r.err, "session monday stops before frame 5, open on the server")) << r.err;
   EXPECT_TRUE(contains(r.err, "--resume")) << r.err;
 
   // Fixed: the same command says the name is taken and what to do.
@@ -155,7 +155,9 @@ TEST(StreamCommand, AStreamStoppedByABadFileIsResumedOnceTheFileIsFixedOrReplace
   }
   r = runProcess({kObjdb, "stream", "--server", address, monday.string(), "--resume"});
   ASSERT_EQ(r.exit_code, 0) << r.out << r.err;
-  EXPECT_TRUE(contains(r.out, "resumed: its map holds")) << r.out;
+  // The frames sent before the bad file were fused: it goes on from frame 5.
+  EXPECT_TRUE(contains(r.out, "resumed: its map holds 5 frames, up to frame 4; sending from frame 5"))
+      << r.out;
   EXPECT_TRUE(contains(r.out, "ended: 12 frames integrated")) << r.out;
 
   // Ended: not resumed again, but replaced; its record stays under another name.

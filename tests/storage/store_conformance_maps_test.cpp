@@ -109,6 +109,57 @@ TEST_P(StoreConformance, SessionsHaveALifecycle) {
       << "an ended session's name stays taken";
 }
 
+// Issue 47: a session's client and counters are kept (unknown, empty, until stored); a session's
+// name is freed by retiring it: deleted when nothing refers to it, else renamed as a record.
+TEST_P(StoreConformance, SessionsKeepClientAndCountersAndRetireByDeletionOrRenaming) {
+  const std::string target = freshTarget();
+  auto store = open(target);
+  ASSERT_NE(store, nullptr);
+  SessionInfo info;
+  info.name = "monday";
+  info.client_info = "objdb stream";
+  ASSERT_TRUE(store->beginSession(info).ok());
+  EXPECT_TRUE(store->sessions().value().front().counters_json.empty());  // unknown
+  ASSERT_TRUE(store->storeSessionCounters("monday", R"({"frames_integrated":"12"})").ok());
+  const Status unknown = store->storeSessionCounters("friday", "{}");
+  EXPECT_EQ(unknown.code(), absl::StatusCode::kNotFound) << unknown;
+  SessionInfo empty;
+  empty.name = "empty";
+  ASSERT_TRUE(store->beginSession(empty).ok());
+  ASSERT_TRUE(store->putRawSegment(makeRawSegment("monday", 1, 1)).ok());
+  ASSERT_TRUE(store->putSavedMap("monday", 4, smallMap(1), {}).ok());
+  store.reset();
+  store = open(target);
+  ASSERT_NE(store, nullptr);
+  auto sessions = store->sessions().value();
+  ASSERT_EQ(sessions.size(), 2u);
+  EXPECT_EQ(sessions[0].client_info, "objdb stream");
+  EXPECT_EQ(sessions[0].counters_json, R"({"frames_integrated":"12"})");
+
+  // Nothing refers to "empty": its row goes, and the name is free.
+  EXPECT_TRUE(store->retireSession("empty", "empty.replaced-1").value());
+  ASSERT_TRUE(store->beginSession(empty).ok());
+  // A raw segment refers to "monday": renamed and interrupted, its segment and data kept under
+  // the new name, its saved map dropped.
+  const auto renamed = store->retireSession("monday", "monday.replaced-1");
+  ASSERT_TRUE(renamed.ok()) << renamed.status();
+  EXPECT_FALSE(*renamed);
+  sessions = store->sessions().value();
+  ASSERT_EQ(sessions.size(), 2u);
+  EXPECT_EQ(sessions[0].name, "monday.replaced-1");
+  EXPECT_EQ(sessions[0].state, SessionState::kInterrupted);
+  EXPECT_FALSE(sessions[0].ended_at.empty());
+  EXPECT_EQ(sessions[0].counters_json, R"({"frames_integrated":"12"})");
+  EXPECT_EQ(store->savedMapFrames("monday.replaced-1").value(), -1);
+  const auto kept = store->rawSegment({"monday.replaced-1", 1});
+  EXPECT_TRUE(kept.ok() && *kept != nullptr) << kept.status();
+  ASSERT_TRUE(store->beginSession(info).ok());  // the name is free
+  ASSERT_TRUE(store->putRawSegment(makeRawSegment("monday", 2, 2)).ok());
+  EXPECT_EQ(store->retireSession("monday", "monday.replaced-1").status().code(),
+            absl::StatusCode::kAlreadyExists);  // a record of that name exists
+  EXPECT_EQ(store->retireSession("friday", "x").status().code(), absl::StatusCode::kNotFound);
+}
+
 TEST_P(StoreConformance, ScenesRoundTripPerBlockAndSurviveReopen) {
   const std::string target = freshTarget();
   const model::ObjectModel m = makeStoreModel(9, 1);
