@@ -6,11 +6,10 @@
 #include <set>
 #include <utility>
 
-#include "absl/strings/match.h"
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/completion/scene_completion.h"
+#include "core/database/merge_source.h"
 #include "core/tsdf/mesh_extraction.h"
 #include "server/job_queue.h"
 #include "server/object_database_service.h"
@@ -20,18 +19,6 @@
 
 namespace objdb::server {
 namespace {
-
-// A merge record's source "segment <session>/<label>" (database::ObjectDatabase's wording); false
-// for anything else ("model <id>").
-bool parseSegmentSource(const std::string& source, std::string* session, uint32_t* label) {
-  constexpr absl::string_view kPrefix = "segment ";
-  if (!absl::StartsWith(source, kPrefix)) return false;
-  const absl::string_view rest = absl::string_view(source).substr(kPrefix.size());
-  const size_t slash = rest.rfind('/');
-  if (slash == absl::string_view::npos || slash == 0) return false;
-  *session = std::string(rest.substr(0, slash));
-  return absl::SimpleAtoi(rest.substr(slash + 1), label);
-}
 
 // InsertTimingTotals.<stage>_s of each stage of database::kInsertStages (null: the API has
 // no such field; proto_convert_test checks that every stage has one).
@@ -266,16 +253,15 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::GetObject(grpc::CallbackServerC
       ev.set_source(m.source);
       // One id space with the poses and the lineage: a segment by its raw segment id.
       std::string session;
-      uint32_t label = 0;
+      gsm::Label label = 0;
       int64_t object = 0;
-      if (parseSegmentSource(m.source, &session, &label)) {
-        auto row = store_->rawSegmentId({session, gsm::Label(label)});
+      if (database::parseSegmentSource(m.source, &session, &label)) {
+        auto row = store_->rawSegmentId({session, label});
         if (row.ok() && *row > 0) {
           ev.set_source_segment_id(uint64_t(*row));
           ev.set_source(absl::StrFormat("segment %d (%s/%d)", *row, session, label));
         }
-      } else if (absl::StartsWith(m.source, "model ") &&
-                 absl::SimpleAtoi(absl::string_view(m.source).substr(6), &object) && object > 0) {
+      } else if (database::parseModelSource(m.source, &object)) {
         ev.set_source_object_id(uint64_t(object));
       }
     }

@@ -1,5 +1,7 @@
 #include "core/database/object_database.h"
 
+#include "core/database/merge_source.h"
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -442,7 +444,7 @@ Status ObjectDatabase::absorbCoAccepted(
     auto next = std::make_shared<const model::ObjectModel>(std::move(joined));
     OBJDB_RETURN_IF_ERROR(store_->absorbModel(
         model::cloneModel(*next),
-        mergeRecordOf(merged->id, absl::StrFormat("model %d", other.id), check), other.id));
+        mergeRecordOf(merged->id, modelSource(other.id), check), other.id));
     for (const auto& key : keys) segment_model_[key] = merged->id;
     changed(other.id, std::nullopt);
     changed(merged->id, std::move(entry));
@@ -657,7 +659,7 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
                                        best->registration.T_target_source),
                     &record, &report.merge_fused_segments));
     const MergeRecord merge =
-        mergeRecordOf(target.id, absl::StrFormat("segment %s/%d", session, segment.label), *best);
+        mergeRecordOf(target.id, segmentSource(session, segment.label), *best);
     std::vector<SegmentKey> keys;
     for (const auto& o : merged.observations) keys.push_back(keyOf(o));
     MatchEntry entry = matchEntryOf(merged);
