@@ -126,6 +126,10 @@ int streamSession(v1::ObjectDatabase::Stub& stub, const std::string& name, const
     std::printf("  resumed: its map holds %llu frames, up to frame %llu; sending from frame %zu\n",
                 (unsigned long long)opened->counters().frames_integrated(),
                 (unsigned long long)opened->last_frame_index(), first);
+  } else if (opened && opened->resumed() && opened->replaced()) {
+    std::printf("  resumed from its first frame: its map was lost (the server crashed since); "
+                "%llu of its segments withdrawn, every frame sent again\n",
+                (unsigned long long)opened->segments_withdrawn());
   } else if (opened && opened->resumed()) {
     std::printf("  resumed: it holds no frame yet\n");
   } else if (opened && opened->replaced()) {

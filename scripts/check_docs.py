@@ -4,12 +4,15 @@
 docs/results.md does not hold: such figures are measured by scripts/figures.py and linked, not
 copied (a copy goes stale the day the code changes).
 
-    scripts/check_docs.py [--results FILE] [DOC...]
+    scripts/check_docs.py [--results FILE] [DOC...] [--reference DOC...]
 
-Default DOCs: README.md and docs/{server,python,web,architecture}.md. docs/gsm.md,
-docs/database.md and docs/structure.md still keep dated measurements of their experiments and
-are not checked yet (issue 47, item 5). Prints each stale figure as "FILE:LINE: ..." and exits 1
-if there is any; 0 and "ok" otherwise.
+Default DOCs: README.md and docs/{server,python,web,architecture}.md, and, as reference pages,
+docs/{gsm,database,structure}.md. A reference page describes rules and parameters; the
+measurements that chose them are dated in docs/experiments.md (not checked). So a reference page
+is held to more kinds of figure as well: measured times (s, ms, µs, min), rates (frames/s),
+counts "N of M", completion gains "+N points", and any date (YYYY-MM-DD) at all. DOCs after
+--reference are checked as reference pages. Prints each stale figure as "FILE:LINE: ..." and
+exits 1 if there is any; 0 and "ok" otherwise.
 """
 
 import re
@@ -18,6 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ["README.md", "docs/server.md", "docs/python.md", "docs/web.md", "docs/architecture.md"]
+REFERENCE_DOCS = ["docs/gsm.md", "docs/database.md", "docs/structure.md"]
 
 # A figure of results.md's kinds, the value in group 1.
 FIGURES = [
@@ -29,6 +33,22 @@ FIGURES = [
     ("purity", r"\bpurity (\d+ %)"),
 ]
 
+# In a reference page, also these measured figures (value in group 1).
+REFERENCE_FIGURES = [
+    ("a time", r"(?<![\w.,])(\d+(?:[.,]\d+)*)(?:\s*[–-]\s*\d+(?:[.,]\d+)*)? ?(?:s|ms|µs|min)\b(?!/)"),
+    ("a rate", r"(?<![\w.,])(\d+(?:[.,]\d+)*) (?:\w+ )?frames?/s\b"),
+    ("a count", r"(?<![\w.,])(\d+(?:,\d+)* of \d+(?:,\d+)*)\b"),
+    ("a completion gain", r"(\+\d+(?:\.\d+)?)(?: points|\s*→)"),
+]
+
+# Never in a reference page: dated material is history and goes to docs/experiments.md.
+DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+
+
+def held(value: str, results: str) -> bool:
+    """Whether results.md holds `value` as a figure of its own (not as part of a longer one)."""
+    return re.search(r"(?<![\d.,])" + re.escape(value) + r"(?![\d,]|\.\d)", results) is not None
+
 
 def main(argv) -> int:
     args = list(argv)
@@ -37,21 +57,37 @@ def main(argv) -> int:
         i = args.index("--results")
         results_path = Path(args[i + 1])
         del args[i:i + 2]
-    docs = [Path(a) for a in args] or [ROOT / d for d in DOCS]
+    reference = []
+    if "--reference" in args:
+        i = args.index("--reference")
+        reference = [Path(a) for a in args[i + 1:]]
+        del args[i:]
+    plain = [Path(a) for a in args]
+    if not plain and not reference:
+        plain = [ROOT / d for d in DOCS]
+        reference = [ROOT / d for d in REFERENCE_DOCS]
     results = results_path.read_text()
     problems = []
-    for doc in docs:
+    checks = [(doc, FIGURES, False) for doc in plain]
+    checks += [(doc, FIGURES + REFERENCE_FIGURES, True) for doc in reference]
+    for doc, figures, is_reference in checks:
         for number, line in enumerate(doc.read_text().splitlines(), 1):
-            for kind, pattern in FIGURES:
+            for kind, pattern in figures:
                 for m in re.finditer(pattern, line):
-                    if m.group(1) not in results:
+                    if not held(m.group(1), results):
                         problems.append(f"{doc}:{number}: quotes {kind} '{m.group(0)}', which is "
-                                        f"not in {results_path.name}: link to it instead")
+                                        f"not in {results_path.name}: link to it instead (or "
+                                        f"date it in experiments.md)")
+            if is_reference:
+                for m in DATE.finditer(line):
+                    problems.append(f"{doc}:{number}: dated '{m.group(0)}': a reference page "
+                                    f"holds no history; it goes to experiments.md")
     for p in problems:
         print(p)
     if problems:
         return 1
-    print(f"ok: {len(docs)} docs quote no figure that {results_path.name} does not hold")
+    print(f"ok: {len(plain)} docs and {len(reference)} reference pages quote no figure that "
+          f"{results_path.name} does not hold")
     return 0
 
 

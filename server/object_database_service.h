@@ -21,7 +21,9 @@
 //   calls, and a full pool refuses at once (RESOURCE_EXHAUSTED).
 // - A session's map lives in memory from its header to EndSession. A server that stops ends
 //   every session not ended yet and stores its map; only a crash loses the frames after the
-//   session's last saved map (--save-map-s), and the next start ends it from that map.
+//   session's last saved map (--save-map-s), and the next start ends it from that map
+//   (INTERRUPTED). A resume of such a session streams it again from its first frame
+//   (resumeSession).
 #pragma once
 
 #include <atomic>
@@ -156,11 +158,15 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
   StatusOr<std::shared_ptr<LiveSession>> beginNewSession(
       const v1::SessionHeader& header, const std::shared_ptr<IngestStream>& stream);
   // The live session of the header's name, attached to `stream` when this server holds its map
-  // and nothing feeds it (null: no session of that name, open a new one). Errors:
-  // FAILED_PRECONDITION (ended, map lost, still streaming, being ended), INVALID_ARGUMENT
-  // (intrinsics or parameters differ from the session's).
+  // and nothing feeds it. Null: no session of that name (open a new one), or, with
+  // `*from_first_frame`, an interrupted session whose map this server does not hold (its server
+  // crashed since): it is replaced and streamed again from its first frame. Errors:
+  // FAILED_PRECONDITION (ended, still streaming, being ended), UNAVAILABLE (being ended from its
+  // saved map at this start), INVALID_ARGUMENT (intrinsics or parameters differ from the
+  // session's).
   StatusOr<std::shared_ptr<LiveSession>> resumeSession(const v1::SessionHeader& header,
-                                                       const std::shared_ptr<IngestStream>& stream);
+                                                       const std::shared_ptr<IngestStream>& stream,
+                                                       bool* from_first_frame);
   // Withdraws every segment session `name` inserted (on the database thread), forgets its live
   // map, and frees its name (Store::retireSession). Returns the segments withdrawn, or nothing
   // when no session has that name. FAILED_PRECONDITION while a stream feeds it, its end runs, or

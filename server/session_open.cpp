@@ -50,7 +50,22 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
     case v1::SessionHeader::IF_EXISTS_REFUSE:
       break;
     case v1::SessionHeader::IF_EXISTS_RESUME: {
-      OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<LiveSession> resumed, resumeSession(header, stream));
+      bool again = false;
+      OBJDB_ASSIGN_OR_RETURN(std::shared_ptr<LiveSession> resumed,
+                             resumeSession(header, stream, &again));
+      if (again) {
+        // Its map is gone with the server that held it: streamed again from its first frame,
+        // on a database without its segments (as one uninterrupted stream would find it).
+        OBJDB_ASSIGN_OR_RETURN(const std::optional<uint64_t> withdrawn,
+                               replaceSession(header.session_name()));
+        opened->set_resumed(true);
+        opened->set_replaced(true);
+        opened->set_segments_withdrawn(withdrawn.value_or(0));
+        logger("server")->info("session {} resumed from its first frame: its map was no longer "
+                               "in memory ({} segments withdrawn)",
+                               header.session_name(), withdrawn.value_or(0));
+        break;
+      }
       if (resumed == nullptr) break;  // no such session: a new one
       opened->set_resumed(true);
       opened->set_has_frames(resumed->has_frame);
@@ -76,7 +91,9 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::openSession(
 }
 
 StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::resumeSession(
-    const v1::SessionHeader& header, const std::shared_ptr<IngestStream>& stream) {
+    const v1::SessionHeader& header, const std::shared_ptr<IngestStream>& stream,
+    bool* from_first_frame) {
+  *from_first_frame = false;
   const std::string& name = header.session_name();
   OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<LiveSession> wanted,
                          sessionFromHeader(header, options_.params));
@@ -86,14 +103,31 @@ StatusOr<std::shared_ptr<LiveSession>> ObjectDatabaseService::resumeSession(
     auto stored = sessionNamed(name);
     if (absl::IsNotFound(stored.status())) return std::shared_ptr<LiveSession>();
     OBJDB_RETURN_IF_ERROR(stored.status());
-    const char* why =
-        stored->state == storage::SessionState::kEnded
-            ? "has ended (EndSession, the server's --auto-end-s, or a server stop ended it)"
-            : "was left by a server that stopped, and its map is no longer in memory";
-    return absl::FailedPreconditionError(absl::StrFormat(
-        "session %s %s, so it cannot take more frames: stream it again with --replace "
-        "(SessionHeader.if_exists REPLACE), or under another name (--session NAME)",
-        name, why));
+    if (stored->state == storage::SessionState::kEnded) {
+      return absl::FailedPreconditionError(absl::StrFormat(
+          "session %s has ended (EndSession, the server's --auto-end-s, or a server stop ended "
+          "it), so it cannot take "
+          "more frames: stream it again with --replace (SessionHeader.if_exists REPLACE), or "
+          "under another name (--session NAME)",
+          name));
+    }
+    // Interrupted (or open, another server's) and its map not here: its server crashed (this
+    // start or another server ended it from its saved map). The label histories of its map were
+    // not saved, so it continues from its first frame; the same camera and parameters, as any
+    // resume.
+    if (stored->intrinsics_json != storage::intrinsicsJson(wanted->intrinsics)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "header.intrinsics differ from session %s's (%s): a resumed session keeps its camera",
+          name, stored->intrinsics_json));
+    }
+    if (stored->params_json != paramsToJson(wanted->params)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "header.params_json gives other parameters than session %s has: a resumed session "
+          "keeps its parameters (send the same --params)",
+          name));
+    }
+    *from_first_frame = true;
+    return std::shared_ptr<LiveSession>();
   }
   if (wanted->intrinsics != session->intrinsics) {
     return absl::InvalidArgumentError(absl::StrFormat(

@@ -5,7 +5,8 @@
 // SQLite's and the blobs' checks pass, and each killed session is reported ended (EndSession
 // answered) or interrupted (killed while streaming), never open. The server saves open
 // sessions' maps every 50 ms, so kills also land during saves, and a session killed after a
-// save is ended from its saved map at the next start.
+// save is ended from its saved map at the next start. A session killed so and resumed builds the
+// database of one uninterrupted stream.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -198,6 +199,104 @@ TEST(ObjdbServerCrash, KilledWhileStreamingLosesNothingItReported) {
   std::printf("%zu kills; %zu objects of answered EndSessions, all stored; %d sessions ended "
               "from their saved maps\n",
               phases.size(), objects.size(), recovered);
+}
+
+// The address a started objdb-server child listens on ("" when it did not start).
+std::string addressOf(ChildProcess& server) {
+  if (!server.started() || !server.waitForStderr("listening on 127.0.0.1:", kStartTimeout)) {
+    return "";
+  }
+  return testing::listeningAddress(server.stderrText());
+}
+
+// A session whose server is SIGKILLed mid-stream is resumed at the next start: the map went with
+// the server, so the session continues from its first frame (its segments, inserted before the
+// kill or from its saved map at the start, withdrawn) and the database is the one an
+// uninterrupted stream builds.
+TEST(ObjdbServerCrash, AResumeAfterAKillBuildsTheDatabaseOfOneUninterruptedStream) {
+  testing::TempDir dir;
+  const testing::Recording& recording = testing::twoBoxes();
+  const size_t frames = recording.depth.size();
+  constexpr size_t kKilledAfter = 17;
+  ASSERT_GT(frames, kKilledAfter);
+  auto command = [](const std::string& db) {
+    return std::vector<std::string>{kServer, "--listen", "127.0.0.1:0", "--db", db,
+                                    "--save-map-s", "0.05"};
+  };
+  auto endAndStop = [](ChildProcess& server, v1::ObjectDatabase::Stub& stub) {
+    v1::EndSessionResponse ended;
+    const grpc::Status end = testing::endSession(stub, "kitchen", &ended);
+    EXPECT_TRUE(end.ok()) << end.error_message();
+    EXPECT_EQ(ended.summary().counters().frames_integrated(), testing::twoBoxes().depth.size());
+    server.sendSignal(SIGTERM);
+    EXPECT_EQ(server.wait(std::chrono::seconds(30)).exit_code, 0) << server.stderrText();
+  };
+
+  const std::string whole_db = (dir / "whole.sqlite").string();
+  {
+    ChildProcess server(command(whole_db));
+    const std::string address = addressOf(server);
+    ASSERT_FALSE(address.empty()) << server.stderrText();
+    auto stub = stubAt(address);
+    const testing::IngestResult all = testing::ingest(*stub, testing::session("kitchen", frames));
+    ASSERT_TRUE(all.status.ok()) << all.status.error_message();
+    endAndStop(server, *stub);
+  }
+
+  const std::string db = (dir / "killed.sqlite").string();
+  {
+    ChildProcess server(command(db));
+    const std::string address = addressOf(server);
+    ASSERT_FALSE(address.empty()) << server.stderrText();
+    auto stub = stubAt(address);
+    grpc::ClientContext context;
+    testing::setDeadline(&context);
+    auto call = stub->Ingest(&context);
+    const std::vector<v1::IngestRequest> requests = testing::session("kitchen", kKilledAfter);
+    for (const auto& request : requests) ASSERT_TRUE(call->Write(request));
+    v1::IngestResponse response;
+    for (size_t acked = 0; acked < kKilledAfter;) {
+      ASSERT_TRUE(call->Read(&response)) << server.stderrText();
+      acked += response.has_ack() ? 1 : 0;
+    }
+    server.collect(std::chrono::milliseconds(300));  // (a map save may land meanwhile)
+    server.sendSignal(SIGKILL);
+    EXPECT_EQ(server.wait(std::chrono::seconds(10)).term_signal, SIGKILL);
+    EXPECT_FALSE(call->Finish().ok());
+  }
+
+  ChildProcess server(command(db));
+  const std::string address = addressOf(server);
+  ASSERT_FALSE(address.empty()) << server.stderrText();
+  auto stub = stubAt(address);
+  std::vector<v1::IngestRequest> requests = testing::session("kitchen", frames);
+  requests.front().mutable_header()->set_if_exists(v1::SessionHeader::IF_EXISTS_RESUME);
+  testing::IngestResult resumed;
+  for (int attempt = 0; attempt < 500; ++attempt) {  // UNAVAILABLE while ended from a saved map
+    resumed = testing::ingest(*stub, requests);
+    if (resumed.status.error_code() != grpc::StatusCode::UNAVAILABLE) break;
+    server.collect(std::chrono::milliseconds(20));
+  }
+  ASSERT_TRUE(resumed.status.ok()) << resumed.status.error_message() << server.stderrText();
+  ASSERT_FALSE(resumed.responses.empty());
+  ASSERT_TRUE(resumed.responses.front().has_opened());
+  const v1::SessionOpened& opened = resumed.responses.front().opened();
+  EXPECT_TRUE(opened.resumed());
+  EXPECT_TRUE(opened.replaced());
+  EXPECT_FALSE(opened.has_frames());
+  EXPECT_EQ(resumed.acks().size(), frames);
+  const bool from_saved_map = server.stderrText().find("ended from its saved map") !=
+                              std::string::npos;
+  endAndStop(server, *stub);
+
+  const auto expected = testing::activeModels(*storage::SqliteStore::open(whole_db).value());
+  ASSERT_FALSE(expected.empty());
+  EXPECT_EQ(testing::activeModels(*storage::SqliteStore::open(db).value()), expected);
+  std::printf("killed after %zu of %zu frames (%s); resumed from the first frame, %llu segments "
+              "withdrawn; the same %zu active models\n",
+              kKilledAfter, frames, from_saved_map ? "ended from its saved map at the start"
+                                                   : "no saved map",
+              (unsigned long long)opened.segments_withdrawn(), expected.size());
 }
 
 }  // namespace

@@ -17,6 +17,7 @@
 #include "storage/store.h"
 #include "tests/server/ingest_fixtures.h"
 #include "tests/server/loopback_server.h"
+#include "tests/server/stored_objects.h"
 
 namespace objdb {
 namespace {
@@ -179,6 +180,58 @@ TEST(SessionResume, AResumedSessionBuildsTheDatabaseOfOneUninterruptedStream) {
       << ended_resume.status.error_message();
   EXPECT_NE(ended_resume.status.error_message().find("--replace"), std::string::npos)
       << ended_resume.status.error_message();
+}
+
+// A graceful stop ends every session with all its acknowledged frames: a resume after it is
+// refused naming --replace, and the replacement builds the database of one uninterrupted stream.
+// (A resume after a crash streams the session again: server_crash_test.cpp.)
+TEST(SessionResume, AfterAServerStopAResumeIsRefusedAndAReplaceBuildsTheSameDatabase) {
+  auto whole = startOrDie(deterministicOptions());
+  ASSERT_NE(whole, nullptr);
+  auto whole_stub = stubFor(*whole);
+  ASSERT_TRUE(ingest(*whole_stub, session("kitchen", kFrames)).status.ok());
+  v1::EndSessionResponse whole_end;
+  ASSERT_TRUE(endSession(*whole_stub, "kitchen", &whole_end).ok());
+  const std::vector<std::string> expected = testing::activeModels(whole->store());
+  ASSERT_FALSE(expected.empty());
+
+  // The client is killed after 17 frames, then the server stops (ending the session) and starts
+  // again on the same file.
+  ServerOptions options = deterministicOptions();
+  options.db_path = scratchDbPath();
+  {
+    auto first = startOrDie(options);
+    ASSERT_NE(first, nullptr);
+    auto stub = stubFor(*first);
+    streamAndKill(*stub, "kitchen", 17);
+  }
+  auto again = startOrDie(options);
+  ASSERT_NE(again, nullptr);
+  auto stub = stubFor(*again);
+  const std::vector<v1::SessionInfo> listed = sessions(*stub);
+  ASSERT_EQ(listed.size(), 1u);
+  EXPECT_EQ(listed[0].state(), v1::SESSION_STATE_ENDED);
+  EXPECT_EQ(listed[0].counters().frames_integrated(), 17u);
+  ASSERT_NE(testing::activeModels(again->store()), std::vector<std::string>())
+      << "the stop inserted nothing of the 17 frames";
+
+  const IngestResult refused = resume(*stub, "kitchen", 0);
+  EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(refused.status.error_message().find("a server stop ended it"), std::string::npos)
+      << refused.status.error_message();
+  EXPECT_NE(refused.status.error_message().find("--replace"), std::string::npos)
+      << refused.status.error_message();
+
+  const IngestResult replaced =
+      ingest(*stub, stream(headerFor("kitchen", v1::SessionHeader::IF_EXISTS_REPLACE), 0, kFrames));
+  ASSERT_TRUE(replaced.status.ok()) << replaced.status.error_message();
+  ASSERT_NE(openedOf(replaced), nullptr);
+  EXPECT_TRUE(openedOf(replaced)->replaced());
+  EXPECT_GT(openedOf(replaced)->segments_withdrawn(), 0u);
+  v1::EndSessionResponse ended;
+  ASSERT_TRUE(endSession(*stub, "kitchen", &ended).ok());
+  EXPECT_EQ(ended.summary().counters().frames_integrated(), kFrames);
+  EXPECT_EQ(testing::activeModels(again->store()), expected);
 }
 
 TEST(SessionResume, AResumeSendingAFrameTheMapHoldsGetsItRejectedAndCarriesOn) {

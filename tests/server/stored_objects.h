@@ -1,10 +1,11 @@
-// What the server crash tests check of the store after their kills: which reported objects it
-// no longer holds.
+// What the server crash and resume tests check of the store: which reported objects it no longer
+// holds, and its active models as text to compare two databases by.
 #pragma once
 
 #include <algorithm>
 #include <cstdint>
 #include <map>
+#include <string>
 #include <vector>
 
 #include "storage/store.h"
@@ -33,6 +34,26 @@ inline std::vector<uint64_t> objectsNotHeld(const storage::Store& store,
     if (std::find(active.begin(), active.end(), holder) == active.end()) lost.push_back(id);
   }
   return lost;
+}
+
+// Each active model of `store` as "points N merges M poses S/L …" (its poses' sessions and
+// labels), sorted: two databases built from the same frames hold the same lines, whatever ids
+// their models got.
+inline std::vector<std::string> activeModels(const storage::Store& store) {
+  storage::ModelQuery all;
+  all.limit = 1000000;
+  const std::vector<storage::ModelSummary> summaries = store.modelSummaries(all).value();
+  std::vector<std::string> lines;
+  for (const auto& m : summaries) {
+    std::string line = "points " + std::to_string(m.num_points) + " merges " +
+                       std::to_string(m.merges) + " poses";
+    for (const auto& pose : m.observations) {
+      line += " " + pose.session + "/" + std::to_string(pose.label);
+    }
+    lines.push_back(line);
+  }
+  std::sort(lines.begin(), lines.end());
+  return lines;
 }
 
 }  // namespace objdb::testing

@@ -125,6 +125,7 @@ class SessionOpened:
     """The stream's first event: the session the frames go to. resumed: an existing session
     continues, holding frames up to last_frame_index (None when it holds none); replaced: an
     existing session was withdrawn (segments_withdrawn of its segments) and this one replaces it.
+    Both: a resumed session whose map a server crash lost continues from its first frame, and stream() sends every frame again.
     """
     session: str
     resumed: bool
