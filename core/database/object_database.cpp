@@ -464,8 +464,9 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
                                                        const LiveScenes& live) {
   Prepared prepared;
   InsertReport& report = prepared.report;
-  auto built = model::buildSegmentModel(segment.grid.clone(), segment.label_voxels,
-                                        buildParams(segment.observation_depth_m));
+  model::ModelBuildParams build = buildParams(segment.observation_depth_m);
+  build.structure = segment.structure;  // the room structure's verdict, when the GSM gave one
+  auto built = model::buildSegmentModel(segment.grid.clone(), segment.label_voxels, build);
   if (!built.ok()) {
     prepared.error = built.status();
     return prepared;
@@ -481,8 +482,17 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
   report.timings.cloud_ms = incoming.timings.cloud_ms + incoming.timings.planarity_ms;
   report.timings.keypoints_ms = incoming.timings.keypoints_ms;
   report.timings.descriptors_ms = incoming.timings.descriptors_ms;
-  if (!incoming.structure) {
-    // A piece of a bigger face (a partition's top, a strip of wall) is structure too: its plane,
+  if (segment.structure.has_value()) {
+    // The GSM's room structure judged it (core/gsm/room_structure.h, ObjectGroups::structure):
+    // one definition of structure for the grouping and for the model's flag. Its planes are
+    // found over the whole map with σ(z) bands, which a single segment's planes, or one plane
+    // grown from it, are not (docs/structure.md). A label larger than furniture can be is
+    // structure there too; the span test below only guards a GSM with other parameters.
+    incoming.structure = *segment.structure || principalSpans(incoming.cloud.points)(0) >
+                                                   params_.gsm.object_max_extent_m;
+  } else if (!incoming.structure) {
+    // Not judged by a room structure (the GSM grouped no objects, or a segment from elsewhere):
+    // a piece of a bigger face (a partition's top, a strip of wall) is structure too: its plane,
     // grown through the session's scene, is bigger than an object can be. Not for an object
     // the GSM grouped from two or more labels: its grouping never joins a structure label to
     // anything (core/gsm/objects.h), so the room structure has judged such a segment an object,
@@ -508,11 +518,12 @@ ObjectDatabase::Prepared ObjectDatabase::prepareInsert(const std::string& sessio
   report.matchable = incoming.matchable(params_.model);
   logger("database")->debug(
       "segment {}/{}: {} points seen from {:.2f} m (depth noise {:.2f} x sigma), {:.0f} % on one "
-      "plane (within {:.1f} cm), grown through the scene to {:.2f} m: {}",
+      "plane (within {:.1f} cm), grown through the scene to {:.2f} m: {} ({})",
       session, segment.label, incoming.cloud.points.size(), segment.observation_depth_m,
       segment.noise_scale, 100.0 * incoming.plane_inlier_ratio, 100.0 * incoming.plane_distance_m,
       report.grown_plane_span_m,
-      incoming.structure ? "structure" : incoming.planar ? "planar" : "object");
+      incoming.structure ? "structure" : incoming.planar ? "planar" : "object",
+      segment.structure.has_value() ? "the room structure's verdict" : "judged here");
   return prepared;
 }
 

@@ -505,6 +505,9 @@ std::vector<RawSegment> extractLabelled(const tsdf::TsdfLayer& layer, const Labe
           return groups.partAt(v, labels.at(layer.blockOfVoxel(v))[layer.linearInBlock(v)]);
         }));
     segments.back().parts = parts;
+    if (params.objects) {
+      segments.back().structure = parts.size() == 1 && groups.structure.contains(parts.front());
+    }
   }
   return segments;
 }
@@ -704,6 +707,9 @@ std::vector<RawSegment> Gsm::extractIdleObjects(bool flush) {
     segments.back().observation_depth_m = depth;
     segments.back().noise_scale = surface_noise_.scale();
     segments.back().parts = parts;
+    // A structure label is an object of its own (the grouping joins it to nothing).
+    segments.back().structure = parts.size() == 1 && (groups_.structure.contains(id) ||
+                                                      groups_.structure.contains(parts.front()));
   }
   return segments;
 }

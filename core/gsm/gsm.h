@@ -50,6 +50,11 @@ struct RawSegment {
   // The session's measured depth-noise scale when the segment was extracted (SurfaceNoise::scale;
   // 0: unknown, e.g. too few frames yet or a segment of a saved map).
   float noise_scale = 0.0f;
+  // The room structure's verdict on it (core/gsm/objects.h, ObjectGroups::structure): true when
+  // it is a structure label (a floor, wall or face piece, or a label larger than furniture),
+  // false for an object. Unset when the GSM did not group objects (GsmParams::objects false): the
+  // database then judges the segment itself.
+  std::optional<bool> structure;
 };
 
 // Milliseconds spent per step of Gsm::integrate.

@@ -224,7 +224,7 @@ StatusOr<SegmentModel> buildSegmentModel(tsdf::TsdfLayer grid,
   model.shared_planes = shape.shared_planes;
   model.plane_distance_m = shape.plane_distance_m;
   model.planar = shape.planar;
-  model.structure = shape.structure;
+  model.structure = params.structure.value_or(shape.structure);
   model.timings.planarity_ms = msSince(t);
   if (model.planar || model.structure ||
       model.cloud.points.size() < size_t(params.model.min_points)) {

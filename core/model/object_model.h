@@ -110,6 +110,9 @@ struct ModelBuildParams {
   // Depth the segment was seen from (RawSegment::observation_depth_m; 0 = unknown): the plane
   // distance of the planarity and structure tests follows the sensor noise there.
   float observation_depth_m = 0.0f;
+  // Whether the segment is room structure, when decided elsewhere (RawSegment::structure, the
+  // GSM's room structure): replaces the model's own structure test. Unset: that test decides.
+  std::optional<bool> structure;
 };
 
 // What a segment makes: a model, or none when the segment cannot be one, with the reason. A

@@ -334,6 +334,33 @@ TEST(ObjectDatabase, APieceOfAFloorAndAWallStripIsStructureWhenTheFloorGrowsOver
   EXPECT_EQ(grouped->grown_plane_span_m, 0.0f);
 }
 
+// A segment the GSM's room structure judged is flagged as it says, whatever its own planes or
+// one of them grown through the scene would say: one definition of structure.
+TEST(ObjectDatabase, TheRoomStructuresVerdictIsTheStructureFlag) {
+  Fixture f;
+  // The wall with a shelf (structure by its own planes, above) judged an object: an object with
+  // keypoints, a match candidate.
+  gsm::RawSegment wall = wallWithShelf(1, 0.0f);
+  wall.structure = false;
+  auto object = f.db->insertSegment("s", wall);
+  ASSERT_TRUE(object.ok()) << object.status();
+  EXPECT_FALSE(object->structure);
+  EXPECT_TRUE(object->matchable);
+  EXPECT_EQ(object->grown_plane_span_m, 0.0f);  // not grown: the room structure judged it
+  // Judged structure: stored as such, never a candidate.
+  wall = wallWithShelf(2, 1.0f);
+  wall.structure = true;
+  auto structure = f.db->insertSegment("t", wall);
+  ASSERT_TRUE(structure.ok()) << structure.status();
+  EXPECT_TRUE(structure->structure);
+  EXPECT_FALSE(structure->matchable);
+  EXPECT_EQ(structure->candidates, 0u);
+  // Unjudged (no verdict): the database's own tests, as before.
+  auto unjudged = f.db->insertSegment("u", wallWithShelf(3, 2.0f));
+  ASSERT_TRUE(unjudged.ok()) << unjudged.status();
+  EXPECT_TRUE(unjudged->structure);
+}
+
 TEST(ObjectDatabase, AReExtractedSegmentReplacesItsEarlierContribution) {
   Fixture f;
   const World& a = kMonday;

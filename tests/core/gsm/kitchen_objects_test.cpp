@@ -172,5 +172,50 @@ TEST(KitchenObjects, TheFittedKitchenIsStructureAndAMugOnTheCounterIsItsOwnObjec
   EXPECT_EQ(majority(by_object.at(mug)), 6) << ::testing::PrintToString(by_object.at(mug));
 }
 
+// Each extracted segment carries the room structure's verdict, which the database takes as its
+// structure flag (docs/structure.md): floor and wall pieces are structure, no chair is.
+TEST(KitchenObjects, ExtractedSegmentsCarryTheRoomStructuresVerdict) {
+  Fused k = fuseKitchen(0, 3);
+  const std::vector<RawSegment> segments = k.gsm.extractIdle(/*flush=*/true);
+  ASSERT_FALSE(segments.empty());
+  int64_t flagged = 0, flagged_on_room = 0, room = 0, room_flagged = 0;
+  for (const RawSegment& segment : segments) {
+    ASSERT_TRUE(segment.structure.has_value()) << "segment " << segment.label;
+    std::map<int, int64_t> votes;
+    for (const Label part : segment.parts) {
+      const auto it = k.votes.find(part);
+      if (it == k.votes.end()) continue;
+      for (const auto& [id, n] : it->second) votes[id] += n;
+    }
+    if (*segment.structure) EXPECT_EQ(segment.parts.size(), 1u) << "segment " << segment.label;
+    for (const auto& [id, n] : votes) {
+      const std::string& c = k.category.count(id) ? k.category.at(id) : std::string();
+      const bool on_room = k.structure_ids.count(id) != 0;  // floor, walls
+      if (c == "dining_chair") {
+        EXPECT_FALSE(*segment.structure && majority(votes) == id)
+            << "segment " << segment.label << ", mostly chair " << id << ", is structure";
+      }
+      if (*segment.structure) {
+        flagged += n;
+        flagged_on_room += on_room || c == "base_cabinet" || c == "counter_top" ||
+                                   c == "tall_cabinet" ? n : 0;
+      }
+      if (on_room) {
+        room += n;
+        room_flagged += *segment.structure ? n : 0;
+      }
+    }
+  }
+  ASSERT_GT(flagged, 0);
+  ASSERT_GT(room, 0);
+  // What is flagged lies on the room and the fitted kitchen; most of the floor and walls is flagged.
+  EXPECT_GE(double(flagged_on_room) / double(flagged), 0.95);
+  EXPECT_GE(double(room_flagged) / double(room), 0.8);
+  std::printf("structure verdicts: %.1f %% of the flagged pixels on the room or the fitted kitchen, "
+              "%.1f %% of the floor's and walls' pixels flagged\n",
+              100.0 * double(flagged_on_room) / double(flagged),
+              100.0 * double(room_flagged) / double(room));
+}
+
 }  // namespace
 }  // namespace objdb::gsm
