@@ -10,6 +10,7 @@ declared, the Dockerfile's COPY sources exist, its build stage installs the buil
 Prints each problem as "FILE: problem" and exits 1 if there is any; 0 and "ok" otherwise.
 """
 
+import argparse
 import re
 import sys
 from pathlib import Path
@@ -87,13 +88,12 @@ def check_dockerfile(path: Path, problems: list) -> None:
 
 
 def main(argv) -> int:
-    args = list(argv)
-    dockerfile = ROOT / "docker" / "Dockerfile"
-    if "--dockerfile" in args:
-        i = args.index("--dockerfile")
-        dockerfile = Path(args[i + 1])
-        del args[i:i + 2]
-    composes = [Path(a) for a in args] or sorted((ROOT / "docker").glob("compose*.yaml"))
+    parser = argparse.ArgumentParser(description="The compose files' references are sound.")
+    parser.add_argument("composes", nargs="*", type=Path)
+    parser.add_argument("--dockerfile", type=Path, default=ROOT / "docker" / "Dockerfile")
+    args = parser.parse_args(argv)
+    dockerfile = args.dockerfile
+    composes = args.composes or sorted((ROOT / "docker").glob("compose*.yaml"))
     problems = []
     for c in composes:
         check_compose(c, problems)

@@ -15,6 +15,7 @@ counts "N of M", completion gains "+N points", and any date (YYYY-MM-DD) at all.
 exits 1 if there is any; 0 and "ok" otherwise.
 """
 
+import argparse
 import re
 import sys
 from pathlib import Path
@@ -51,18 +52,12 @@ def held(value: str, results: str) -> bool:
 
 
 def main(argv) -> int:
-    args = list(argv)
-    results_path = ROOT / "docs" / "results.md"
-    if "--results" in args:
-        i = args.index("--results")
-        results_path = Path(args[i + 1])
-        del args[i:i + 2]
-    reference = []
-    if "--reference" in args:
-        i = args.index("--reference")
-        reference = [Path(a) for a in args[i + 1:]]
-        del args[i:]
-    plain = [Path(a) for a in args]
+    parser = argparse.ArgumentParser(description="Docs quote no figure docs/results.md lacks.")
+    parser.add_argument("docs", nargs="*", type=Path)
+    parser.add_argument("--results", type=Path, default=ROOT / "docs" / "results.md")
+    parser.add_argument("--reference", nargs="*", type=Path, default=[])
+    args = parser.parse_args(argv)
+    results_path, plain, reference = args.results, args.docs, args.reference
     if not plain and not reference:
         plain = [ROOT / d for d in DOCS]
         reference = [ROOT / d for d in REFERENCE_DOCS]

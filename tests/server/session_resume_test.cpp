@@ -98,6 +98,22 @@ std::vector<v1::SessionInfo> sessions(v1::ObjectDatabase::Stub& stub) {
   return {response.sessions().begin(), response.sessions().end()};
 }
 
+// A server that took every frame of session `name` in one uninterrupted stream and ended it
+// (`ended`: EndSession's answer); null after a test failure naming why.
+std::unique_ptr<ObjdbServer> uninterrupted(const std::string& name,
+                                           v1::EndSessionResponse* ended) {
+  auto server = startOrDie(deterministicOptions());
+  if (server == nullptr) return nullptr;
+  auto stub = stubFor(*server);
+  const IngestResult streamed = ingest(*stub, session(name, kFrames));
+  const grpc::Status end = streamed.status.ok() ? endSession(*stub, name, ended) : streamed.status;
+  if (!end.ok()) {
+    ADD_FAILURE() << "session " << name << ": " << end.error_message();
+    return nullptr;
+  }
+  return server;
+}
+
 // Streams frames [0, frames) of `name` and cancels the call once all are acknowledged, as a
 // killed client does; returns once the server no longer streams it (a resume is accepted).
 void streamAndKill(v1::ObjectDatabase::Stub& stub, const std::string& name, size_t frames) {
@@ -186,12 +202,9 @@ TEST(SessionResume, AResumedSessionBuildsTheDatabaseOfOneUninterruptedStream) {
 // refused naming --replace, and the replacement builds the database of one uninterrupted stream.
 // (A resume after a crash streams the session again: server_crash_test.cpp.)
 TEST(SessionResume, AfterAServerStopAResumeIsRefusedAndAReplaceBuildsTheSameDatabase) {
-  auto whole = startOrDie(deterministicOptions());
-  ASSERT_NE(whole, nullptr);
-  auto whole_stub = stubFor(*whole);
-  ASSERT_TRUE(ingest(*whole_stub, session("kitchen", kFrames)).status.ok());
   v1::EndSessionResponse whole_end;
-  ASSERT_TRUE(endSession(*whole_stub, "kitchen", &whole_end).ok());
+  const auto whole = uninterrupted("kitchen", &whole_end);
+  ASSERT_NE(whole, nullptr);
   const std::vector<std::string> expected = testing::activeModels(whole->store());
   ASSERT_FALSE(expected.empty());
 
@@ -278,19 +291,14 @@ TEST(SessionResume, ANameInUseIsRefusedNamingResumeReplaceAndAnotherName) {
 }
 
 TEST(SessionResume, AReplacedSessionsSegmentsAreWithdrawnAndItsRecordKeptUnderANewName) {
-  auto reference = startOrDie(deterministicOptions());
-  ASSERT_NE(reference, nullptr);
-  auto reference_stub = stubFor(*reference);
-  ASSERT_TRUE(ingest(*reference_stub, session("lab", kFrames)).status.ok());
   v1::EndSessionResponse ended;
-  ASSERT_TRUE(endSession(*reference_stub, "lab", &ended).ok());
+  const auto reference = uninterrupted("lab", &ended);
+  ASSERT_NE(reference, nullptr);
   const std::vector<std::string> once = contents(*reference);
 
-  auto server = startOrDie(deterministicOptions());
+  const auto server = uninterrupted("lab", &ended);
   ASSERT_NE(server, nullptr);
   auto stub = stubFor(*server);
-  ASSERT_TRUE(ingest(*stub, session("lab", kFrames)).status.ok());
-  ASSERT_TRUE(endSession(*stub, "lab", &ended).ok());
   const size_t objects = size_t(ended.summary().object_ids_size());
   ASSERT_GT(objects, 0u);
 
