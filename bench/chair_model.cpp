@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstdint>
 #include <utility>
 
@@ -90,11 +91,21 @@ StatusOr<model::ObjectModel> chairModel(int variant, int threads,
 
 StatusOr<model::ObjectModel> describedChairModel(int variant, size_t num_keypoints) {
   OBJDB_ASSIGN_OR_RETURN(model::ObjectModel built, chairModel(variant));
+  // The database's own keypoints (ISS ∪ Harris3D ∪ uniform) first, evenly thinned to
+  // num_keypoints when there are more, so that the descriptors are distributed as an inserted
+  // segment's are (the global descriptor compares distributions); points spread over the cloud
+  // make up the rest when there are fewer.
   std::vector<uint32_t> keypoints;
-  const size_t n = built.cloud.points.size();
-  for (size_t k = 0; k < num_keypoints && k < n; ++k) {
-    keypoints.push_back(uint32_t(k * n / num_keypoints));
+  const std::vector<uint32_t>& own = built.keypoint_indices;
+  for (size_t k = 0; k < num_keypoints && k < own.size(); ++k) {
+    keypoints.push_back(own[k * own.size() / std::min(num_keypoints, own.size())]);
   }
+  const size_t n = built.cloud.points.size();
+  const size_t extra = num_keypoints - keypoints.size();
+  for (size_t k = 0; k < extra && k < n; ++k) keypoints.push_back(uint32_t(k * n / extra));
+  std::sort(keypoints.begin(), keypoints.end());
+  keypoints.erase(std::unique(keypoints.begin(), keypoints.end()), keypoints.end());
+
   built.descriptors = model::computeFpfh(built.cloud, &keypoints, DescriptorParams{});
   built.keypoint_indices = std::move(keypoints);
   return built;

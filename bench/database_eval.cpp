@@ -125,8 +125,9 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "database_eval: %s\n", std::string(db.status().message()).c_str());
     return 1;
   }
-  (*db)->measurePrefilterRecall(params.database.prefilter_epsilon > 0.0f);
+  (*db)->measurePrefilterRecall(true);
   PrefilterRecall against_exhaustive;
+  ShortlistRecall shortlist_recall;
   std::map<database::SegmentKey, SegmentTruth> truth_of;
   std::vector<std::pair<std::string, gsm::RawSegment>> last_session;  // for --scale
   // Per session: every non-structure object, its shape and pose.
@@ -261,6 +262,7 @@ int main(int argc, char** argv) {
         continue;
       }
       against_exhaustive.add(*report);
+      shortlist_recall.add(*report);
       if (report->matchable && !relevant.empty()) {
         size_t kept = 0;
         for (const auto& c : report->results) kept += relevant.count(c.model_id);
@@ -412,6 +414,8 @@ int main(int argc, char** argv) {
               "candidates (%zu of %zu); %zu of %zu inserts kept at least one\n",
               relevant_models ? 100.0 * relevant_kept / relevant_models : 0.0, relevant_kept,
               relevant_models, inserts_hit, inserts_with_relevant);
+  std::printf("%s (database.shortlist %d)\n", shortlist_recall.summary().c_str(),
+              params.database.shortlist);
   if (against_exhaustive.inserts > 0) {
     std::printf("%s (epsilon %g)\n", against_exhaustive.summary().c_str(),
                 params.database.prefilter_epsilon);

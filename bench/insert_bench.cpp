@@ -16,6 +16,8 @@
 //   build/bin/insert_bench --db postgresql://USER@HOST/EMPTY_DB [--models 1000,3000,10000,30000]
 //   build/bin/insert_bench --epsilon 2 --recall on   (database.prefilter_epsilon, and its recall
 //                                                     against the exhaustive vote per insert)
+//   build/bin/insert_bench --shortlist 0 --recall on (database.shortlist; with --recall the rank
+//                                                     of every accepted model by global similarity)
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
@@ -158,11 +160,13 @@ struct Options {
   std::string target;  // SQLite path or PostgreSQL URI
   float epsilon = -1.0f;  // database.prefilter_epsilon (< 0: the default)
   bool recall = false;    // also the exhaustive vote per insert, for the prefilter's recall
+  int shortlist = -1;     // database.shortlist (< 0: the default; 0: the vote over every model)
 };
 
 // One N: its fill, open and inserts.
 struct Row {
   PrefilterRecall recall;
+  ShortlistRecall shortlist;
   size_t models = 0;
   double fill_s = 0, open_s = 0;
   std::vector<double> ms;  // wall time of each insert
@@ -178,6 +182,7 @@ double quantile(std::vector<double> v, double q) {
 Status run(const Options& options) {
   Params params;  // the server's defaults (objdb-server without --config)
   if (options.epsilon >= 0.0f) params.database.prefilter_epsilon = options.epsilon;
+  if (options.shortlist >= 0) params.database.shortlist = options.shortlist;
   std::fprintf(stderr, "insert_bench: building %d chair models\n", kKinds);
   std::vector<Kind> kinds;
   for (int v = 0; v < kKinds; ++v) {
@@ -208,9 +213,10 @@ Status run(const Options& options) {
   };
 
   std::printf("insert_bench: %s; the server's default Params (database.threads %d, "
-              "max_candidates %d, stop_after_accepted %d, prefilter_epsilon %g); chairs at 1 cm, "
-              "500 described keypoints per filled model\n",
-              store->describe().c_str(), params.database.threads, params.database.max_candidates,
+              "shortlist %d, max_candidates %d, stop_after_accepted %d, prefilter_epsilon %g); chairs "
+              "at 1 cm, 500 described keypoints per filled model\n",
+              store->describe().c_str(), params.database.threads, params.database.shortlist,
+              params.database.max_candidates,
               params.database.stop_after_accepted, params.database.prefilter_epsilon);
   std::printf("2 cores, noisy; figures vary\n\n");
   std::printf("%9s %8s %8s %10s %8s %8s %8s %8s %11s %7s\n", "N models", "fill s", "open s",
@@ -249,6 +255,7 @@ Status run(const Options& options) {
       }
       row.timings += report->timings;
       row.recall.add(*report);
+      row.shortlist.add(*report);
     }
     double mean = 0;
     for (const double ms : row.ms) mean += ms;
@@ -268,7 +275,10 @@ Status run(const Options& options) {
                   t.load_ms / n, t.match_register_ms / n, t.model_verify_ms / n,
                   t.scene_verify_ms / n, t.store_ms / n);
       // Copies tie: the exhaustive vote breaks ties by model id, the approximate by its search.
-      if (options.recall) std::printf("%9s %s\n", "", row.recall.summary().c_str());
+      if (options.recall) {
+        std::printf("%9s %s\n", "", row.recall.summary().c_str());
+        std::printf("%9s %s\n", "", row.shortlist.summary().c_str());
+      }
     }
     std::fflush(stdout);
     rows.push_back(std::move(row));
@@ -328,6 +338,8 @@ int main(int argc, char** argv) {
       db = value;
     } else if (name == "--epsilon") {
       ok = absl::SimpleAtof(value, &options.epsilon) && options.epsilon >= 0.0f;
+    } else if (name == "--shortlist") {
+      ok = absl::SimpleAtoi(value, &options.shortlist) && options.shortlist >= 0;
     } else if (name == "--recall") {
       ok = value == "on" || value == "off";
       options.recall = value == "on";
@@ -338,7 +350,7 @@ int main(int argc, char** argv) {
   if (!ok) {
     std::fprintf(stderr, "usage: insert_bench [--models N,N,... (ascending, each in [1, "
                  "1000000])] [--inserts 1..100000] [--dir DIR] [--db SQLITE_FILE|POSTGRES_URI] "
-                 "[--epsilon E] [--recall on|off]\n");
+                 "[--epsilon E] [--shortlist N] [--recall on|off]\n");
     return 2;
   }
   setLogLevel("warn");

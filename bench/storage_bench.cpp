@@ -143,7 +143,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   t = Clock::now();
-  auto entries = (*reopened)->matchEntries().value();
+  auto entries = (*reopened)->matchEntries(true).value();
   std::vector<model::Fpfh> all;
   for (const auto& e : entries.entries) all.insert(all.end(), e.descriptors.begin(), e.descriptors.end());
   const double entries_s = secondsSince(t);

@@ -14,7 +14,7 @@ set -euo pipefail
 BUILD_PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libabsl-dev
-  libpcl-dev libflann-dev liblz4-dev libopencv-dev libeigen3-dev
+  libpcl-dev libflann-dev liblz4-dev libopencv-dev libeigen3-dev libfaiss-dev
   libsqlite3-dev libzstd-dev zlib1g-dev
   libpq-dev
   libspdlog-dev libfmt-dev nlohmann-json3-dev

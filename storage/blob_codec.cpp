@@ -170,6 +170,7 @@ const char* blobKindName(BlobKind kind) {
     case BlobKind::kVoxelList: return "voxel list";
     case BlobKind::kTransform: return "transform";
     case BlobKind::kLabelBlock: return "label block";
+    case BlobKind::kGlobalDescriptor: return "global descriptor";
   }
   return "unknown";
 }
@@ -464,6 +465,30 @@ StatusOr<std::vector<model::Fpfh>> decodeDescriptors(std::string_view blob) {
   }
   OBJDB_RETURN_IF_ERROR(reader.finish());
   return descriptors;
+}
+
+std::string encodeGlobalDescriptor(const GlobalDescriptorBlob& descriptor,
+                                   const BlobOptions& options) {
+  std::string payload;
+  put(&payload, uint32_t(descriptor.codebook_version));
+  put(&payload, uint32_t(descriptor.values.size()));
+  putArray(&payload, descriptor.values.data(), descriptor.values.size());
+  return encodeBlob(BlobKind::kGlobalDescriptor, payload, options);
+}
+
+StatusOr<GlobalDescriptorBlob> decodeGlobalDescriptor(std::string_view blob) {
+  constexpr BlobKind kKind = BlobKind::kGlobalDescriptor;
+  OBJDB_ASSIGN_OR_RETURN(const std::string payload, decodeBlob(kKind, blob));
+  Reader reader(kKind, payload);
+  GlobalDescriptorBlob out;
+  OBJDB_ASSIGN_OR_RETURN(const uint32_t version, reader.read<uint32_t>());
+  OBJDB_ASSIGN_OR_RETURN(const uint32_t n, reader.read<uint32_t>());
+  OBJDB_ASSIGN_OR_RETURN(const char* bytes, reader.span(n, sizeof(float)));
+  out.codebook_version = int(version);
+  out.values.resize(n);
+  readArray(bytes, n, out.values.data());
+  OBJDB_RETURN_IF_ERROR(reader.finish());
+  return out;
 }
 
 std::string encodeVoxelList(const std::vector<tsdf::VoxelIndex>& voxels,

@@ -29,6 +29,7 @@ enum class BlobKind : uint16_t {
   kVoxelList = 6,    // global voxel indices
   kTransform = 7,    // a rigid transform, 12 doubles (rotation column-major, translation)
   kLabelBlock = 8,   // one block of a scene map's main labels (uint32 per voxel)
+  kGlobalDescriptor = 9,  // a model's global descriptor (model/global_descriptor.h), versioned
 };
 
 const char* blobKindName(BlobKind kind);
@@ -76,6 +77,16 @@ StatusOr<std::vector<uint32_t>> decodeLabelBlock(std::string_view blob);
 std::string encodeDescriptors(const std::vector<model::Fpfh>& descriptors,
                               const BlobOptions& options = {});
 StatusOr<std::vector<model::Fpfh>> decodeDescriptors(std::string_view blob);
+
+// A model's global descriptor and the codebook version it was computed with
+// (model::kCodebookVersion).
+struct GlobalDescriptorBlob {
+  int codebook_version = 0;
+  std::vector<float> values;
+};
+std::string encodeGlobalDescriptor(const GlobalDescriptorBlob& descriptor,
+                                   const BlobOptions& options = {});
+StatusOr<GlobalDescriptorBlob> decodeGlobalDescriptor(std::string_view blob);
 
 std::string encodeVoxelList(const std::vector<tsdf::VoxelIndex>& voxels,
                             const BlobOptions& options = {});

@@ -5,6 +5,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
+#include "core/model/global_descriptor.h"
 
 namespace objdb::storage {
 
@@ -55,10 +56,23 @@ StatusOr<database::MergeRecord> readMergeRecord(const Row& row) {
 Status readMatchEntry(const Row& row, database::MatchEntry* entry) {
   *entry = {.id = row.integer(0), .planar = row.integer(1) != 0, .structure = row.integer(5) != 0,
             .num_points = size_t(row.integer(2)), .num_keypoints = size_t(row.integer(3)),
-            .descriptors = {}, .segments = {}};
-  auto descriptors = decodeDescriptors(row.bytes(4));
-  if (!descriptors.ok()) return inRow(descriptors.status(), "models", entry->id, "descriptors");
-  entry->descriptors = std::move(*descriptors);
+            .descriptors = {}, .global = {}, .descriptors_omitted = false, .segments = {}};
+  // Active models always have a descriptors blob (of no descriptors, for some): none here is the
+  // query without them (kMatchEntryColumnsWithoutDescriptors).
+  entry->descriptors_omitted = row.bytes(4).empty();
+  if (!entry->descriptors_omitted) {
+    auto descriptors = decodeDescriptors(row.bytes(4));
+    if (!descriptors.ok()) return inRow(descriptors.status(), "models", entry->id, "descriptors");
+    entry->descriptors = std::move(*descriptors);
+  }
+  if (!row.bytes(6).empty()) {
+    auto global = decodeGlobalDescriptor(row.bytes(6));
+    if (!global.ok()) return inRow(global.status(), "models", entry->id, "global_descriptor");
+    if (global->codebook_version == model::kCodebookVersion &&
+        int(global->values.size()) == model::globalDescriptorSize()) {
+      entry->global = std::move(global->values);
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -82,6 +96,10 @@ EncodedModel encodeModel(const model::ObjectModel& m, const BlobOptions& options
   e.cloud = encodePointCloud(m.cloud, options);
   e.keypoints = encodeIndices(m.keypoint_indices, options);
   e.descriptors = encodeDescriptors(m.descriptors, options);
+  if (!m.descriptors.empty()) {
+    e.global_descriptor = encodeGlobalDescriptor(
+        {model::kCodebookVersion, model::globalDescriptor(m.descriptors)}, options);
+  }
   e.timings = m.timings;
   for (const auto& o : m.observations) {
     e.observations.push_back({o.session, int64_t(o.label), encodeTransform(o.T_world_object),

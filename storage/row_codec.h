@@ -40,8 +40,9 @@ StatusOr<std::vector<uint32_t>> parseParts(const std::string& text);
 inline constexpr const char* kModelColumns =
     "planar, plane_inlier_ratio, num_points, num_keypoints, voxel_size, bbox_min_x, bbox_min_y, "
     "bbox_min_z, bbox_max_x, bbox_max_y, bbox_max_z, grid, surface_voxels, cloud, keypoints, "
-    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms, structure";
-inline constexpr int kNumModelColumns = 21;
+    "descriptors, cloud_ms, planarity_ms, keypoints_ms, descriptors_ms, structure, "
+    "global_descriptor";
+inline constexpr int kNumModelColumns = 22;
 
 // The tables StoreStats lists, each with the SQL expression of one row's blob bytes.
 struct StatsTable {
@@ -90,9 +91,12 @@ inline constexpr const char* kMergeRecordColumns =
     "id, target, source, transform, icp_rmse_m, tsdf_rmse_m, tsdf_overlap, scene_checks";
 StatusOr<database::MergeRecord> readMergeRecord(const Row& row);
 // Without segments. DATA_LOSS naming the row for damaged descriptors (`entry->id` is set then
-// too).
+// too). A global descriptor of another codebook version (or none) leaves `global` empty.
 inline constexpr const char* kMatchEntryColumns =
-    "id, planar, num_points, num_keypoints, descriptors, structure";
+    "id, planar, num_points, num_keypoints, descriptors, structure, global_descriptor";
+// The same without the local descriptors (a database with a short list opens on these).
+inline constexpr const char* kMatchEntryColumnsWithoutDescriptors =
+    "id, planar, num_points, num_keypoints, NULL, structure, global_descriptor";
 Status readMatchEntry(const Row& row, database::MatchEntry* entry);
 
 // A model's columns (the models row and its observation rows), encoded.
@@ -105,6 +109,7 @@ struct EncodedModel {
   Eigen::Vector3f bbox_min = Eigen::Vector3f::Zero(), bbox_max = Eigen::Vector3f::Zero();
   std::string grid, surface_voxels, cloud, keypoints, descriptors;
   model::BuildTimings timings;
+  std::string global_descriptor;  // its blob; empty (NULL) for a model without descriptors
   struct Obs {
     std::string session;
     int64_t label;

@@ -128,6 +128,9 @@ constexpr AddedColumn kAddedColumns[] = {
     // (Store::storeSessionCounters), empty when never stored.
     {6, "sessions", "client TEXT NOT NULL DEFAULT ''"},
     {6, "sessions", "counters TEXT NOT NULL DEFAULT ''"},
+    // Two-stage retrieval: a model's global descriptor (the short list's key, read when a
+    // database opens instead of every local descriptor); NULL until computed.
+    {7, "models", "global_descriptor $BLOB"},
 };
 
 // `ddl` in dialect `d`, with `more` placeholders replaced too.
@@ -143,12 +146,13 @@ std::string inDialect(absl::string_view ddl, const SqlDialect& d,
   return absl::StrReplaceAll(ddl, more);
 }
 
-// Table `table` of template `ddl`, with the added columns in place when `with_added`.
+// Table `table` of template `ddl`, with the columns added up to SQLite schema `added_up_to` in
+// place (0: none).
 std::string withAddedColumns(const SqlDialect& d, absl::string_view ddl, absl::string_view table,
-                             bool with_added) {
+                             int added_up_to) {
   std::string columns;
   for (const AddedColumn& c : kAddedColumns) {
-    if (with_added && c.table == table) {
+    if (c.version <= added_up_to && c.table == table) {
       absl::StrAppend(&columns, "  ", inDialect(c.definition, d), ",\n");
     }
   }
@@ -172,9 +176,9 @@ std::string mapTables(const SqlDialect& d, const MapTables& tables) {
   return out;
 }
 
-std::string segmentAndModelTables(const SqlDialect& d, bool with_added) {
-  return absl::StrCat(withAddedColumns(d, kRawSegments, "raw_segments", with_added),
-                      withAddedColumns(d, kModels, "models", with_added),
+std::string segmentAndModelTables(const SqlDialect& d, int added_up_to) {
+  return absl::StrCat(withAddedColumns(d, kRawSegments, "raw_segments", added_up_to),
+                      withAddedColumns(d, kModels, "models", added_up_to),
                       inDialect(kObservationsAndMerges, d));
 }
 

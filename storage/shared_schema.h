@@ -49,9 +49,10 @@ struct SqlDialect {
 std::string sessionsTable(const SqlDialect& d);
 // A map's table and its TSDF and label block tables.
 std::string mapTables(const SqlDialect& d, const MapTables& tables);
-// raw_segments, models, observations and merge_records with their indexes. `with_added`: with
-// the columns of addedColumns() in place (else as the SQLite schema's version 1 had them).
-std::string segmentAndModelTables(const SqlDialect& d, bool with_added);
+// raw_segments, models, observations and merge_records with their indexes, with the columns the
+// SQLite schema added up to its version `added_up_to` in place (0: as its version 1 had them).
+// The SQL of a schema version must never change: each caller names the version it froze.
+std::string segmentAndModelTables(const SqlDialect& d, int added_up_to);
 // The ALTER TABLE statements by which the SQLite schema's version `version` added columns to the
 // tables of segmentAndModelTables().
 std::string addedColumns(const SqlDialect& d, int version);

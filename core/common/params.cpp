@@ -172,6 +172,7 @@ Status DatabaseParams::validate() const {
       inRange(prefilter_neighbours, 1, 10000, "database.prefilter_neighbours"));
   OBJDB_RETURN_IF_ERROR(inRange(prefilter_min_votes, 1, 100000, "database.prefilter_min_votes"));
   OBJDB_RETURN_IF_ERROR(inRange(prefilter_epsilon, 0.0, 100.0, "database.prefilter_epsilon"));
+  OBJDB_RETURN_IF_ERROR(inRange(shortlist, 0, 1000000, "database.shortlist"));
   OBJDB_RETURN_IF_ERROR(inRange(max_candidates, 1, 100000, "database.max_candidates"));
   OBJDB_RETURN_IF_ERROR(inRange(stop_after_accepted, 0, 100000, "database.stop_after_accepted"));
   return inRange(threads, 1, 256, "database.threads");

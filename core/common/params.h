@@ -278,6 +278,14 @@ struct DatabaseParams {
   // kd-tree (deterministic). An exact search (0) in 33-D FPFH space visits most of the tree: its
   // time grows with the stored descriptors (docs/database.md, "Scale").
   float prefilter_epsilon = 2.0f;
+  // Two-stage retrieval (issue 48): the vote above runs only over the descriptors of the
+  // `shortlist` models whose global descriptors (model/global_descriptor.h: VLAD over their FPFH)
+  // are most similar to the new model's; 0 votes over every stored model's descriptors (the
+  // search before the short list, kept for comparison). 4 × max_candidates: the vote still picks
+  // the candidates it registers from several times as many models as it registers, and a
+  // database of many copies of one object fills the list with copies of it (docs/database.md,
+  // "Scale", measures the list's recall of the merges the full vote accepts).
+  int shortlist = 64;
   // The candidates registered per insert at most: bounds the insert's time.
   int max_candidates = 16;
   // Candidates are evaluated in waves of `threads`, most voted first; once this many have been

@@ -124,6 +124,7 @@ void forEachField(DatabaseParams& p, Fn&& fn) {
   fn("prefilter_neighbours", p.prefilter_neighbours);
   fn("prefilter_min_votes", p.prefilter_min_votes);
   fn("prefilter_epsilon", p.prefilter_epsilon);
+  fn("shortlist", p.shortlist);
   fn("max_candidates", p.max_candidates);
   fn("stop_after_accepted", p.stop_after_accepted);
   fn("merge_co_accepted", p.merge_co_accepted);

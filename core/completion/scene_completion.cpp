@@ -47,7 +47,7 @@ StatusOr<tsdf::TsdfLayer> completeScene(const database::ModelStore& store,
   out = {};
   // Which models to load: built from >= 2 segments, one of them of this session (the prefilter's
   // entries say so without decoding grids).
-  OBJDB_ASSIGN_OR_RETURN(const database::MatchEntries entries, store.matchEntries());
+  OBJDB_ASSIGN_OR_RETURN(const database::MatchEntries entries, store.matchEntries(false));
   // A model that cannot be read might be one of this session's: say so rather than leave it out.
   if (!entries.skipped.empty()) return entries.skipped.front();
   // A model with a merge beyond the paper's e*_TSDF (loosened with a session's measured depth

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "absl/strings/str_format.h"
+#include "core/model/global_descriptor.h"
 
 namespace objdb::database {
 
@@ -22,7 +23,8 @@ void recordMerge(const MergeRecord& merge, std::vector<MergeRecord>* merges) {
 }  // namespace
 
 bool MatchEntry::matchable(const ModelParams& params) const {
-  return model::isMatchable(planar || structure, num_points, num_keypoints, descriptors.size(), params);
+  return model::isMatchable(planar || structure, num_points, num_keypoints,
+                            descriptors_omitted ? num_keypoints : descriptors.size(), params);
 }
 
 MatchEntry matchEntryOf(const model::ObjectModel& model) {
@@ -33,8 +35,20 @@ MatchEntry matchEntryOf(const model::ObjectModel& model) {
   e.num_points = model.cloud.points.size();
   e.num_keypoints = model.keypoint_indices.size();
   e.descriptors = model.descriptors;
+  if (!e.descriptors.empty()) e.global = model::globalDescriptor(e.descriptors);
   for (const auto& o : model.observations) e.segments.push_back({o.session, o.label});
   return e;
+}
+
+StatusOr<std::vector<std::vector<model::Fpfh>>> ModelStore::descriptorsOf(
+    const std::vector<int64_t>& ids) const {
+  std::vector<std::vector<model::Fpfh>> out;
+  out.reserve(ids.size());
+  for (const int64_t id : ids) {
+    OBJDB_ASSIGN_OR_RETURN(const std::shared_ptr<const model::ObjectModel> m, model(id));
+    out.push_back(m->descriptors);
+  }
+  return out;
 }
 
 Status InMemoryModelStore::putRawSegment(const RawSegmentRecord& segment) {
@@ -129,11 +143,17 @@ StatusOr<std::vector<int64_t>> InMemoryModelStore::modelIds() const {
   return ids;
 }
 
-StatusOr<MatchEntries> InMemoryModelStore::matchEntries() const {
+StatusOr<MatchEntries> InMemoryModelStore::matchEntries(bool descriptors) const {
   std::lock_guard lock(mutex_);
   MatchEntries out;
   out.entries.reserve(models_.size());
-  for (const auto& [id, model] : models_) out.entries.push_back(matchEntryOf(*model));
+  for (const auto& [id, model] : models_) {
+    out.entries.push_back(matchEntryOf(*model));
+    if (!descriptors) {
+      out.entries.back().descriptors.clear();
+      out.entries.back().descriptors_omitted = true;
+    }
+  }
   return out;
 }
 

@@ -59,6 +59,12 @@ struct MatchEntry {
   size_t num_points = 0;
   size_t num_keypoints = 0;
   std::vector<model::Fpfh> descriptors;
+  // model::globalDescriptor of the descriptors (empty when it has none, or when the store's is
+  // missing or of another codebook version): the short list's key.
+  std::vector<float> global;
+  // Read without its local descriptors (ModelStore::matchEntries(false)): `descriptors` is empty
+  // and matchable() takes them to be one per keypoint, as every stored model with descriptors has.
+  bool descriptors_omitted = false;
   std::vector<SegmentKey> segments;  // the raw segments it holds (its observations)
   // The same rule as ObjectModel::matchable.
   bool matchable(const ModelParams& params) const;
@@ -142,8 +148,22 @@ class ModelStore {
   // Ids of the stored (active) models, ascending.
   virtual StatusOr<std::vector<int64_t>> modelIds() const = 0;
   // What the matcher's prefilter needs of every active model, without grids and clouds. Models
-  // whose data cannot be read are left out and named in `skipped`.
-  virtual StatusOr<MatchEntries> matchEntries() const = 0;
+  // whose data cannot be read are left out and named in `skipped`. `descriptors` false: without
+  // the local descriptors (a database with a short list opens on the global ones and reads the
+  // local ones of its short list per insert, descriptorsOf).
+  virtual StatusOr<MatchEntries> matchEntries(bool descriptors) const = 0;
+  // The local descriptors of models `ids`, in that order, and nothing else of them. NOT_FOUND
+  // for an id the store does not hold. This default decodes each whole model.
+  virtual StatusOr<std::vector<std::vector<model::Fpfh>>> descriptorsOf(
+      const std::vector<int64_t>& ids) const;
+  // Keeps global descriptors computed for stored models whose own was missing or of another
+  // codebook version (model::kCodebookVersion), so that the next opening reads them. Not a
+  // change of the models (other writers are not told). This default keeps nothing.
+  virtual Status putGlobalDescriptors(
+      const std::vector<std::pair<int64_t, std::vector<float>>>& globals) {
+    (void)globals;
+    return Status();
+  }
   virtual StatusOr<std::vector<MergeRecord>> mergeRecords() const = 0;
 
   // Stores the scene map of a session (its TSDF and, when given, the GSM's main label of every
@@ -170,7 +190,7 @@ class InMemoryModelStore : public ModelStore {
   Status removeModel(int64_t id) override;
   StatusOr<std::shared_ptr<const model::ObjectModel>> model(int64_t id) const override;
   StatusOr<std::vector<int64_t>> modelIds() const override;
-  StatusOr<MatchEntries> matchEntries() const override;
+  StatusOr<MatchEntries> matchEntries(bool descriptors) const override;
   StatusOr<std::vector<MergeRecord>> mergeRecords() const override;
   Status putScene(const std::string& session, std::shared_ptr<const tsdf::TsdfLayer> scene,
                   std::shared_ptr<const gsm::LabelBlocks> labels = nullptr) override;

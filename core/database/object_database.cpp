@@ -1,6 +1,7 @@
 #include "core/database/object_database.h"
 
 #include "core/database/merge_source.h"
+#include "core/database/parallel_for.h"
 
 #include <algorithm>
 #include <atomic>
@@ -13,6 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "core/common/logging.h"
 #include "core/common/plane_spans.h"
+#include "core/model/global_descriptor.h"
 #include "core/model/structure.h"
 
 namespace objdb::database {
@@ -21,21 +23,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double msSince(Clock::time_point t) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-}
-
-// fn(i) for every i in [begin, end), on up to `threads` threads, the caller one of them; each i
-// is taken by the next free thread.
-void parallelFor(size_t begin, size_t end, size_t threads, const std::function<void(size_t)>& fn) {
-  std::atomic<size_t> next{begin};
-  auto work = [&] {
-    for (size_t i = next++; i < end; i = next++) fn(i);
-  };
-  std::vector<std::thread> pool;
-  for (size_t t = 1; t < std::min(threads, end > begin ? end - begin : 0); ++t) {
-    pool.emplace_back(work);
-  }
-  work();
-  for (auto& thread : pool) thread.join();
 }
 
 }  // namespace
@@ -51,13 +38,20 @@ StatusOr<std::unique_ptr<ObjectDatabase>> ObjectDatabase::create(const Params& p
   if (writer != nullptr) {
     OBJDB_ASSIGN_OR_RETURN(db->applied_seq_, store->modelChangeSeq());
   }
-  OBJDB_ASSIGN_OR_RETURN(MatchEntries entries, store->matchEntries());
-  std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>> matchable;
+  // With a short list the local descriptors stay in the store (read per insert for the list).
+  const bool listed = params.database.shortlist > 0;
+  OBJDB_ASSIGN_OR_RETURN(MatchEntries entries, store->matchEntries(/*descriptors=*/!listed));
+  std::vector<MatchEntry*> matchable;
   for (auto& e : entries.entries) {
     for (const auto& key : e.segments) db->segment_model_[key] = e.id;
-    if (e.matchable(params.model)) matchable.emplace_back(e.id, &e.descriptors);
+    if (e.matchable(params.model)) matchable.push_back(&e);
   }
-  db->prefilter_.load(matchable, params.database.threads);
+  OBJDB_RETURN_IF_ERROR(db->loadGlobalIndex(matchable));
+  if (!listed) {
+    std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>> descriptors;
+    for (MatchEntry* e : matchable) descriptors.emplace_back(e->id, &e->descriptors);
+    db->prefilter_.load(descriptors, params.database.threads);
+  }
   for (const auto& skipped : entries.skipped) {
     logger("database")->error("object database: a stored model is unreadable and left out: {}",
                               std::string(skipped.message()));
@@ -176,10 +170,14 @@ void ObjectDatabase::changed(int64_t model_id, std::optional<MatchEntry> entry) 
   std::lock_guard lock(mutex_);
   indices_.erase(model_id);
   models_.remove_if([&](const auto& m) { return m->id == model_id; });
+  forgetDescriptors(model_id);
   if (entry && entry->matchable(params_.model)) {
-    prefilter_.put(model_id, entry->descriptors);
+    if (params_.database.shortlist == 0) prefilter_.put(model_id, entry->descriptors);
+    global_.put(model_id, entry->global.empty() ? model::globalDescriptor(entry->descriptors)
+                                                : entry->global);
   } else {
     prefilter_.erase(model_id);
+    global_.erase(model_id);
   }
 }
 
@@ -193,40 +191,6 @@ std::shared_ptr<const matching::DescriptorIndex> ObjectDatabase::indexOf(
   auto index = std::make_shared<const matching::DescriptorIndex>(model.descriptors);
   std::lock_guard lock(mutex_);
   return indices_.emplace(model.id, std::move(index)).first->second;
-}
-
-StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model,
-                                                             bool exhaustive) {
-  std::lock_guard lock(mutex_);
-  const int k = params_.database.prefilter_neighbours;
-  // The searches on database.threads threads (the index is only read), the votes in descriptor
-  // order: the same candidates on any number of threads.
-  const size_t n = model.descriptors.size();
-  std::vector<std::vector<PrefilterIndex::Neighbour>> found(n);
-  parallelFor(0, n, size_t(std::max(1, params_.database.threads)), [&](size_t i) {
-    const model::Fpfh& d = model.descriptors[i];
-    found[i] = exhaustive ? prefilter_.nearestExhaustive(d, k) : prefilter_.nearest(d, k);
-  });
-  std::map<int64_t, int> votes;
-  std::set<int64_t> voted;
-  for (const auto& neighbours : found) {
-    voted.clear();
-    for (const auto& [owner, similarity] : neighbours) {
-      if (similarity < params_.matching.similarity_threshold) continue;
-      if (owner != model.id && voted.insert(owner).second) ++votes[owner];
-    }
-  }
-  std::vector<std::pair<int, int64_t>> ranked;
-  for (const auto& [id, n] : votes) {
-    if (n >= params_.database.prefilter_min_votes) ranked.emplace_back(-n, id);
-  }
-  std::sort(ranked.begin(), ranked.end());
-  std::vector<int64_t> ids;
-  for (const auto& [negative_votes, id] : ranked) {
-    if (ids.size() >= size_t(params_.database.max_candidates)) break;
-    ids.push_back(id);
-  }
-  return ids;
 }
 
 ObjectDatabase::Thresholds ObjectDatabase::thresholdsFor(float depth_m, float noise_scale) const {
@@ -564,11 +528,17 @@ StatusOr<InsertReport> ObjectDatabase::insertLocked(const std::string& session,
   std::vector<std::shared_ptr<const model::ObjectModel>> loaded;
   if (report.matchable) {
     auto t = Clock::now();
-    OBJDB_ASSIGN_OR_RETURN(std::vector<int64_t> ranked, candidatesFor(incoming));
+    OBJDB_ASSIGN_OR_RETURN(std::vector<int64_t> ranked,
+                           candidatesFor(incoming, false, &report.shortlist));
     report.timings.prefilter_ms = msSince(t);
     if (measure_prefilter_) {
       OBJDB_ASSIGN_OR_RETURN(report.exhaustive_candidates, candidatesFor(incoming, true));
       report.prefilter_candidates = ranked;
+      std::lock_guard lock(mutex_);
+      for (const GlobalIndex::Hit& hit :
+           global_.nearest(model::globalDescriptor(incoming.descriptors), 0, incoming.id)) {
+        report.global_ranking.push_back(hit.id);
+      }
     }
     t = Clock::now();
     candidates.reserve(ranked.size());

@@ -20,6 +20,7 @@
 #include "core/common/params.h"
 #include "core/common/status.h"
 #include "core/database/model_store.h"
+#include "core/database/global_index.h"
 #include "core/database/prefilter_index.h"
 #include "core/gsm/gsm.h"
 #include "core/matching/registration.h"
@@ -136,12 +137,17 @@ struct InsertReport {
   // ObjectDatabase::measurePrefilterRecall only (else empty): the prefilter's candidate ids as
   // the insert used them, and those of the exhaustive vote, most voted first.
   std::vector<int64_t> prefilter_candidates, exhaustive_candidates;
+  // measurePrefilterRecall only: the short list the insert's vote ran over (empty with
+  // DatabaseParams::shortlist 0), and every matchable stored model ranked by global similarity
+  // to the segment's model, most similar first (the short list is its first `shortlist`).
+  std::vector<int64_t> shortlist, global_ranking;
 };
 
 class ObjectDatabase {
  public:
-  // Params are validated. The store outlives the database. The database keeps the prefilter's
-  // entries of every model in memory, loaded here; it is the store's only writer, or, on a store
+  // Params are validated. The store outlives the database. The database keeps every matchable
+  // model's global descriptor in memory (and, with DatabaseParams::shortlist 0, its local
+  // descriptors), loaded here; it is the store's only writer, or, on a store
   // with several (ModelStore::lockWriter), it catches up on the others' changes each time it
   // takes the writer lock, before it matches (object_database_sync.cpp).
   static StatusOr<std::unique_ptr<ObjectDatabase>> create(const Params& params, ModelStore* store);
@@ -167,8 +173,12 @@ class ObjectDatabase {
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
   // `exhaustive`: the vote over every stored descriptor's exact distance (linear in their
   // number), whatever DatabaseParams::prefilter_epsilon says.
+  // Without `exhaustive`, the vote runs over the DatabaseParams::shortlist models of the most
+  // similar global descriptors (written to `shortlist` when given; with shortlist 0 over every
+  // model, `shortlist` left alone).
   StatusOr<std::vector<int64_t>> candidatesFor(const model::ObjectModel& model,
-                                               bool exhaustive = false);
+                                               bool exhaustive = false,
+                                               std::vector<int64_t>* shortlist = nullptr);
   // For benchmarks: every insert also runs the exhaustive vote and reports both candidate lists
   // (InsertReport::prefilter_candidates, exhaustive_candidates), so the recall of an approximate
   // prefilter can be measured on the inserts as they happen.
@@ -221,6 +231,17 @@ class ObjectDatabase {
                           const std::vector<std::shared_ptr<const model::ObjectModel>>& loaded,
                           const LiveScenes& live, InsertReport* report);
   std::shared_ptr<const matching::DescriptorIndex> indexOf(const model::ObjectModel& model);
+  // The short list for a global descriptor (model `exclude` left out); mutex_ held.
+  std::vector<int64_t> shortlistFor(const std::vector<float>& global, int64_t exclude) const;
+  // Fills the global index from the entries; a global descriptor missing in the store (an older
+  // schema, another codebook version) is computed from the local ones and written back
+  // (object_database_retrieval.cpp).
+  Status loadGlobalIndex(const std::vector<MatchEntry*>& matchable);
+  // The local descriptors of models `ids` (a short list), from the cache or the store; mutex_
+  // held. forgetDescriptors drops a changed model's.
+  StatusOr<std::vector<std::shared_ptr<const std::vector<model::Fpfh>>>> cachedDescriptors(
+      const std::vector<int64_t>& ids);
+  void forgetDescriptors(int64_t id);
   // Model `id` decoded: from the cache of the kCachedModels most recently loaded (candidates
   // recur: every insert of a repeated object meets the same models), else from the store.
   StatusOr<std::shared_ptr<const model::ObjectModel>> loadModel(int64_t id);
@@ -236,9 +257,22 @@ class ObjectDatabase {
   static constexpr size_t kCachedModels = 32;
   std::list<std::shared_ptr<const model::ObjectModel>> models_;
   std::map<SegmentKey, int64_t> segment_model_;  // which model holds each segment
-  // The prefilter's descriptors of every matchable stored model, updated by every change this
-  // database makes and by the changes other writers made (no rebuild per insert).
+  // With DatabaseParams::shortlist 0 only: the descriptors of every matchable stored model,
+  // updated by every change this database makes and by the changes other writers made (no
+  // rebuild per insert). With a short list the local descriptors stay in the store.
   PrefilterIndex prefilter_;
+  // The same models' global descriptors: the short list (DatabaseParams::shortlist).
+  GlobalIndex global_;
+  // With a short list: recently voted-over models' local descriptors (mutex_), least recently
+  // used first out once they hold more than kCachedDescriptors (about 130 MB of FPFH).
+  static constexpr size_t kCachedDescriptors = 1000000;
+  struct CachedDescriptors {
+    std::shared_ptr<const std::vector<model::Fpfh>> descriptors;
+    std::list<int64_t>::iterator lru;
+  };
+  std::map<int64_t, CachedDescriptors> descriptor_cache_;
+  std::list<int64_t> descriptor_lru_;  // most recently used first
+  size_t cached_descriptors_ = 0;
 
   // Several writers (object_database_sync.cpp). insertSegment and withdrawSegment run their
   // *Locked body under the store's writer lock, taken by beginWrite, which first applies the

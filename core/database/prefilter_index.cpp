@@ -4,19 +4,11 @@
 #include <thread>
 #include <tuple>
 
+#include "core/model/global_descriptor.h"
+
 namespace objdb::database {
-namespace {
 
-float squaredDistance(const model::Fpfh& a, const model::Fpfh& b) {
-  float d2 = 0.0f;
-  for (size_t c = 0; c < a.size(); ++c) {
-    const float e = a[c] - b[c];
-    d2 += e * e;
-  }
-  return d2;
-}
-
-}  // namespace
+using model::fpfhSquaredDistance;
 
 std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearestOf(std::vector<Candidate> found,
                                                                  int k) {
@@ -156,6 +148,17 @@ void PrefilterIndex::put(int64_t id, const std::vector<model::Fpfh>& descriptors
   }
 }
 
+std::vector<model::Fpfh> PrefilterIndex::descriptorsOf(int64_t id) const {
+  const auto it = where_.find(id);
+  if (it == where_.end()) return {};
+  const Tree& tree = *it->second.tree;
+  // Contiguous in its tree, from the first whose sequence is the model's first.
+  const auto first = std::lower_bound(tree.sequence.begin(), tree.sequence.end(), it->second.first);
+  const size_t begin = size_t(first - tree.sequence.begin());
+  return {tree.descriptors().begin() + std::ptrdiff_t(begin),
+          tree.descriptors().begin() + std::ptrdiff_t(begin + it->second.count)};
+}
+
 std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh& query,
                                                                int k) const {
   // The trees' k nearest are by Euclidean distance, so the merge is too: (distance², owner,
@@ -179,7 +182,7 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearest(const model::Fpfh
     for (const auto& [i, similarity] : hits) {
       if (!alive(*tree, i) || taken == size_t(k)) continue;
       ++taken;
-      found.emplace_back(squaredDistance(query, tree->descriptors()[i]), tree->owner[i],
+      found.emplace_back(fpfhSquaredDistance(query, tree->descriptors()[i]), tree->owner[i],
                          tree->sequence[i], similarity);
     }
   }
@@ -199,7 +202,7 @@ std::vector<PrefilterIndex::Neighbour> PrefilterIndex::nearestExhaustive(
   for (const auto& tree : trees_) {
     for (size_t i = 0; i < tree->size(); ++i) {
       if (!alive(*tree, i)) continue;
-      scanned.push_back({{squaredDistance(query, tree->descriptors()[i]), tree->owner[i],
+      scanned.push_back({{fpfhSquaredDistance(query, tree->descriptors()[i]), tree->owner[i],
                           tree->sequence[i], 0.0f},
                          &tree->descriptors()[i]});
     }

@@ -51,6 +51,9 @@ class PrefilterIndex {
   // linear in size() (for measuring the approximate search's recall).
   std::vector<Neighbour> nearestExhaustive(const model::Fpfh& query, int k) const;
 
+  // Model `id`'s descriptors as put (empty when it has none here).
+  std::vector<model::Fpfh> descriptorsOf(int64_t id) const;
+
   size_t size() const { return live_; }  // live descriptors
   size_t trees() const { return trees_.size(); }
   // Descriptors put into a kd-tree build so far (the work the index did; a full rebuild per

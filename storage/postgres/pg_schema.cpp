@@ -29,7 +29,7 @@ CREATE TABLE objdb_meta (
 )sql",
                       sessionsTable(kDialect), mapTables(kDialect, kSceneTables),
                       mapTables(kDialect, kSavedTables),
-                      segmentAndModelTables(kDialect, /*with_added=*/true),
+                      segmentAndModelTables(kDialect, /*added_up_to=*/5),
                       "INSERT INTO objdb_meta(key, value) VALUES ('application', 'objdb'), "
                       "('schema_version', '0');\n");
 }
@@ -100,6 +100,8 @@ const std::vector<Migration>& schemaMigrations() {
       // SQLite's schema 6.
       {3, "sessions that outlive their server: sessions.client, sessions.counters",
        addedColumns(kDialect, 6)},
+      // SQLite's schema 7.
+      {4, "two-stage retrieval: models.global_descriptor", addedColumns(kDialect, 7)},
   };
   return migrations;
 }

@@ -8,7 +8,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
+#include "core/model/global_descriptor.h"
 #include "storage/postgres/postgres_internal.h"
 
 namespace objdb::storage {
@@ -31,6 +33,11 @@ void addModelColumns(Params* p, const EncodedModel& e) {
   p->bytes(e.grid).bytes(e.surface_voxels).bytes(e.cloud).bytes(e.keypoints).bytes(e.descriptors);
   p->add(e.timings.cloud_ms).add(e.timings.planarity_ms).add(e.timings.keypoints_ms);
   p->add(e.timings.descriptors_ms).add(e.structure);
+  if (e.global_descriptor.empty()) {
+    p->null();
+  } else {
+    p->bytes(e.global_descriptor);
+  }
 }
 
 // "$first, $first+1, ..." for `n` parameters.
@@ -93,7 +100,8 @@ Status retireModel(const pg::Connection& c, int64_t id, int64_t merged_into) {
   OBJDB_ASSIGN_OR_RETURN(
       Result r, c.exec(absl::StrFormat("UPDATE models SET state = $1, merged_into = $2::bigint, "
                                        "grid = NULL, surface_voxels = NULL, cloud = NULL, "
-                                       "keypoints = NULL, descriptors = NULL, updated_at = %s, "
+                                       "keypoints = NULL, descriptors = NULL, global_descriptor = NULL, "
+                                       "updated_at = %s, "
                                        "change_seq = %s WHERE id = $3 AND state = 'active'",
                                        pg::kNow, kNextChange),
                        p, "retiring the model"));
@@ -351,8 +359,8 @@ namespace {
 // The prefilter entries of the active models changed after change `since` (0: every active
 // model), inside the caller's read snapshot; `retired` (when given) gets the models changed
 // after it that are no longer active.
-Status readMatchEntries(const pg::Connection& c, int64_t since, database::MatchEntries* out,
-                        std::vector<int64_t>* retired) {
+Status readMatchEntries(const pg::Connection& c, int64_t since, bool descriptors,
+                        database::MatchEntries* out, std::vector<int64_t>* retired) {
   Params p;
   p.add(since);
   if (retired != nullptr) {
@@ -364,7 +372,9 @@ Status readMatchEntries(const pg::Connection& c, int64_t since, database::MatchE
   OBJDB_ASSIGN_OR_RETURN(Result s,
                          c.exec(absl::StrFormat("SELECT %s FROM models WHERE state = 'active' AND "
                                                 "change_seq >= $1 ORDER BY id",
-                                                kMatchEntryColumns),
+                                                descriptors
+                                                    ? kMatchEntryColumns
+                                                    : kMatchEntryColumnsWithoutDescriptors),
                                 p, "reading match entries"));
   std::map<int64_t, size_t> slot;
   for (int row = 0; row < s.rows(); ++row) {
@@ -391,11 +401,11 @@ Status readMatchEntries(const pg::Connection& c, int64_t since, database::MatchE
 
 }  // namespace
 
-StatusOr<database::MatchEntries> PostgresStore::matchEntries() const {
+StatusOr<database::MatchEntries> PostgresStore::matchEntries(bool descriptors) const {
   database::MatchEntries out;
   OBJDB_RETURN_IF_ERROR(impl_->read("reading match entries", [&](const pg::Connection& c) {
     out = {};
-    return readMatchEntries(c, 0, &out, nullptr);
+    return readMatchEntries(c, 0, descriptors, &out, nullptr);
   }));
   return out;
 }
@@ -424,12 +434,60 @@ StatusOr<database::ModelChanges> PostgresStore::modelChangesSince(int64_t seq) c
     out.seq = std::max(seq, r.integer(0, 0));
     if (out.seq == seq) return absl::OkStatus();
     database::MatchEntries entries;
-    OBJDB_RETURN_IF_ERROR(readMatchEntries(c, seq + 1, &entries, &out.retired));
+    OBJDB_RETURN_IF_ERROR(readMatchEntries(c, seq + 1, true, &entries, &out.retired));
     out.entries = std::move(entries.entries);
     out.skipped = std::move(entries.skipped);
     return absl::OkStatus();
   }));
   return out;
+}
+
+StatusOr<std::vector<std::vector<model::Fpfh>>> PostgresStore::descriptorsOf(
+    const std::vector<int64_t>& ids) const {
+  std::vector<std::vector<model::Fpfh>> out;
+  OBJDB_RETURN_IF_ERROR(impl_->read("reading descriptors", [&](const pg::Connection& c) -> Status {
+    out.assign(ids.size(), {});
+    Params p;
+    p.text(absl::StrCat("{", absl::StrJoin(ids, ","), "}"));
+    OBJDB_ASSIGN_OR_RETURN(Result r, c.exec("SELECT id, descriptors FROM models WHERE "
+                                            "state = 'active' AND id = ANY($1::text::bigint[])",
+                                            p, "reading descriptors"));
+    std::map<int64_t, int> row_of;
+    for (int row = 0; row < r.rows(); ++row) row_of[r.integer(row, 0)] = row;
+    for (size_t i = 0; i < ids.size(); ++i) {
+      const auto it = row_of.find(ids[i]);
+      if (it == row_of.end()) {
+        return absl::NotFoundError(absl::StrFormat("no object model %d", ids[i]));
+      }
+      const std::string_view blob = r.bytes(it->second, 1);
+      if (blob.empty()) continue;
+      auto decoded = decodeDescriptors(blob);
+      if (!decoded.ok()) return inRow(decoded.status(), "models", ids[i], "descriptors");
+      out[i] = std::move(*decoded);
+    }
+    return absl::OkStatus();
+  }));
+  return out;
+}
+
+Status PostgresStore::putGlobalDescriptors(
+    const std::vector<std::pair<int64_t, std::vector<float>>>& globals) {
+  if (globals.empty()) return absl::OkStatus();
+  // Not a change of the models: the change sequence stays, other writers compute their own.
+  return impl_->write(absl::StrFormat("storing %d global descriptors", globals.size()),
+                      [&](const pg::Connection& c) -> Status {
+                        for (const auto& [id, values] : globals) {
+                          Params p;
+                          p.bytes(encodeGlobalDescriptor({model::kCodebookVersion, values},
+                                                         options_.blobs));
+                          p.add(id);
+                          OBJDB_RETURN_IF_ERROR(c.exec("UPDATE models SET global_descriptor = $1 "
+                                                       "WHERE id = $2 AND state = 'active'",
+                                                       p, "storing a global descriptor")
+                                                    .status());
+                        }
+                        return absl::OkStatus();
+                      });
 }
 
 }  // namespace objdb::storage

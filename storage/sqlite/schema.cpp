@@ -19,7 +19,7 @@ const std::vector<Migration>& schemaMigrations() {
   static const std::vector<Migration> migrations = {
       {1, "sessions, scene maps, raw segments, models, observations, merge records",
        absl::StrCat("\n", sessionsTable(kDialect), mapTables(kDialect, kSceneTables),
-                    segmentAndModelTables(kDialect, /*with_added=*/false))},
+                    segmentAndModelTables(kDialect, /*added_up_to=*/0))},
       // Saved live maps of open sessions (a crash loses only the frames after the last save).
       {2, "saved live maps of open sessions",
        absl::StrCat("\n", mapTables(kDialect, kSavedTables))},
@@ -30,6 +30,8 @@ const std::vector<Migration>& schemaMigrations() {
        absl::StrCat("\n", addedColumns(kDialect, 5))},
       {6, "sessions that outlive their server: sessions.client, sessions.counters",
        absl::StrCat("\n", addedColumns(kDialect, 6))},
+      {7, "two-stage retrieval: models.global_descriptor",
+       absl::StrCat("\n", addedColumns(kDialect, 7))},
   };
   return migrations;
 }

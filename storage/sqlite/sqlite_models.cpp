@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
+#include "core/model/global_descriptor.h"
 #include "storage/sqlite/sqlite_store.h"
 #include "storage/row_codec.h"
 #include "storage/sqlite/sqlite_store_internal.h"
@@ -30,6 +31,11 @@ void bindModel(Statement* s, const EncodedModel& e) {
   s->bind(17, e.timings.cloud_ms).bind(18, e.timings.planarity_ms);
   s->bind(19, e.timings.keypoints_ms).bind(20, e.timings.descriptors_ms);
   s->bind(21, int64_t(e.structure));
+  if (e.global_descriptor.empty()) {
+    s->bindNull(22);
+  } else {
+    s->bindBlob(22, e.global_descriptor);
+  }
 }
 
 }  // namespace
@@ -165,7 +171,8 @@ Status SqliteStore::retireModel(int64_t id, int64_t merged_into) {
                          Statement::prepare(*writer_,
                                             "UPDATE models SET state = ?, merged_into = ?, "
                                             "grid = NULL, surface_voxels = NULL, cloud = NULL, "
-                                            "keypoints = NULL, descriptors = NULL, updated_at = %s "
+                                            "keypoints = NULL, descriptors = NULL, global_descriptor = NULL, "
+                                            "updated_at = %s "
                                             "WHERE id = ? AND state = 'active'",
                                             kNow));
   s.bind(1, std::string_view(merged_into > 0 ? "merged" : "removed"));
@@ -318,7 +325,7 @@ StatusOr<std::vector<int64_t>> SqliteStore::modelIds() const {
   return ids;
 }
 
-StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
+StatusOr<database::MatchEntries> SqliteStore::matchEntries(bool descriptors) const {
   OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
   OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
   database::MatchEntries out;
@@ -327,7 +334,8 @@ StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
                          Statement::prepare(*lease,
                                             "SELECT %s FROM models WHERE state = 'active' "
                                             "ORDER BY id",
-                                            kMatchEntryColumns));
+                                            descriptors ? kMatchEntryColumns
+                                                        : kMatchEntryColumnsWithoutDescriptors));
   while (true) {
     OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
     if (!row) break;
@@ -353,6 +361,53 @@ StatusOr<database::MatchEntries> SqliteStore::matchEntries() const {
   }
   OBJDB_RETURN_IF_ERROR(snapshot.commit());
   return out;
+}
+
+StatusOr<std::vector<std::vector<model::Fpfh>>> SqliteStore::descriptorsOf(
+    const std::vector<int64_t>& ids) const {
+  OBJDB_ASSIGN_OR_RETURN(ReaderLease lease, reader());
+  OBJDB_ASSIGN_OR_RETURN(Transaction snapshot, Transaction::begin(*lease, Transaction::Kind::kRead));
+  OBJDB_ASSIGN_OR_RETURN(
+      Statement s, Statement::prepare(*lease, "SELECT descriptors FROM models WHERE id = ? AND "
+                                              "state = 'active'"));
+  std::vector<std::vector<model::Fpfh>> out;
+  out.reserve(ids.size());
+  for (const int64_t id : ids) {
+    OBJDB_RETURN_IF_ERROR(s.reset());
+    s.bind(1, id);
+    OBJDB_ASSIGN_OR_RETURN(const bool row, s.step());
+    if (!row) return absl::NotFoundError(absl::StrFormat("no object model %d", id));
+    if (s.columnBlob(0).empty()) {
+      out.emplace_back();
+      continue;
+    }
+    auto decoded = decodeDescriptors(s.columnBlob(0));
+    if (!decoded.ok()) return inRow(decoded.status(), "models", id, "descriptors");
+    out.push_back(std::move(*decoded));
+  }
+  OBJDB_RETURN_IF_ERROR(snapshot.commit());
+  return out;
+}
+
+Status SqliteStore::putGlobalDescriptors(
+    const std::vector<std::pair<int64_t, std::vector<float>>>& globals) {
+  if (globals.empty()) return Status();
+  OBJDB_ASSIGN_OR_RETURN(const std::unique_lock<std::mutex> held, holdWriter());
+  auto body = [&]() -> Status {
+    OBJDB_ASSIGN_OR_RETURN(Transaction txn,
+                           Transaction::begin(*writer_, Transaction::Kind::kWrite));
+    OBJDB_ASSIGN_OR_RETURN(Statement s,
+                           Statement::prepare(*writer_, "UPDATE models SET global_descriptor = ? "
+                                                        "WHERE id = ? AND state = 'active'"));
+    for (const auto& [id, values] : globals) {
+      OBJDB_RETURN_IF_ERROR(s.reset());
+      s.bindBlob(1, encodeGlobalDescriptor({model::kCodebookVersion, values}, options_.blobs));
+      s.bind(2, id);
+      OBJDB_RETURN_IF_ERROR(s.run());
+    }
+    return txn.commit();
+  };
+  return annotate(body(), absl::StrFormat("storing %d global descriptors", globals.size()));
 }
 
 }  // namespace objdb::storage

@@ -1,5 +1,9 @@
 // The object database (Algorithm 1) over the SQLite store: the same result as in memory, and a
 // reopened file carries on — the models, their segments and the scene maps are all there.
+#include <sqlite3.h>
+
+#include <tuple>
+
 #include <gtest/gtest.h>
 
 #include "core/database/object_database.h"
@@ -195,6 +199,63 @@ TEST(ObjectDatabaseOnSqlite, AnInsertThatFailsOnDiskEndsAsIfItNeverFailedWhenRet
   }
   EXPECT_GE(failed, 5);
   EXPECT_GE(failed_in_merge, 1) << "no sampled fault hit the merge itself";
+}
+
+// The global index (two-stage retrieval) is the store's global_descriptor column: a database
+// reopened on the file ranks as the one that inserted; a file whose column was emptied (a store
+// of an older schema) gets it rebuilt from the local descriptors, ranks the same, and keeps it.
+TEST(ObjectDatabaseOnSqlite, TheGlobalIndexSurvivesARestartAndEqualsARebuild) {
+  using objdb::testing::chair;
+  using objdb::testing::extinguisher;
+  const World chair_a{chair(), objdb::testing::poseXyYaw(0, 0, 0.2)};
+  const World fire{extinguisher(), objdb::testing::poseXyYaw(1.0, 0.5, 1.0)};
+  const World box{boxWithBall(), objdb::testing::poseXyYaw(-1.0, 0.8, 0.7)};
+  const World chair_b{chair(), objdb::testing::poseXyYaw(0.2, -1.2, 1.9)};
+  objdb::Params p = params();
+  p.database.shortlist = 1;
+  objdb::testing::TempDir dir;
+  // The rankings a fourth segment (the second chair) meets, after a reopen.
+  auto rankAfterReopen = [&](const std::string& path, bool empty_the_column) {
+    {
+      auto store = SqliteStore::open(path).value();
+      EXPECT_TRUE(store->putScene("s", std::make_shared<tsdf::TsdfLayer>(
+                                           sceneGrid({chair_a, fire, box, chair_b})))
+                      .ok());
+      auto db = database::ObjectDatabase::create(p, store.get()).value();
+      uint32_t label = 1;
+      for (const World* w : {&chair_a, &fire, &box}) {
+        EXPECT_TRUE(db->insertSegment("s", objdb::testing::rawSegment(label++, *w)).ok());
+      }
+    }
+    if (empty_the_column) {
+      sqlite3* raw = nullptr;
+      EXPECT_EQ(sqlite3_open(path.c_str(), &raw), SQLITE_OK);
+      EXPECT_EQ(sqlite3_exec(raw, "UPDATE models SET global_descriptor = NULL", nullptr, nullptr,
+                             nullptr),
+                SQLITE_OK);
+      sqlite3_close(raw);
+    }
+    auto store = SqliteStore::open(path).value();
+    auto db = database::ObjectDatabase::create(p, store.get()).value();
+    db->measurePrefilterRecall(true);
+    const auto r = db->insertSegment("s", objdb::testing::rawSegment(4, chair_b, View{-10, 0.05f}));
+    EXPECT_TRUE(r.ok()) << r.status();
+    size_t stored = 0;
+    for (const auto& e : store->matchEntries(false).value().entries) stored += !e.global.empty();
+    return std::make_tuple(r->global_ranking, r->shortlist, r->model_id, stored);
+  };
+  const auto [kept, kept_list, kept_model, kept_stored] =
+      rankAfterReopen((dir / "kept.sqlite").string(), false);
+  const auto [rebuilt, rebuilt_list, rebuilt_model, rebuilt_stored] =
+      rankAfterReopen((dir / "rebuilt.sqlite").string(), true);
+  ASSERT_EQ(kept.size(), 3u);
+  EXPECT_EQ(kept_list, std::vector<int64_t>{1});  // the first chair heads the list
+  EXPECT_EQ(kept_model, 1);                      // and takes the second
+  EXPECT_EQ(rebuilt, kept);
+  EXPECT_EQ(rebuilt_list, kept_list);
+  EXPECT_EQ(rebuilt_model, kept_model);
+  EXPECT_EQ(kept_stored, 3u);
+  EXPECT_EQ(rebuilt_stored, 3u);  // written back when the database opened
 }
 
 }  // namespace

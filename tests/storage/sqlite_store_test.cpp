@@ -113,7 +113,7 @@ TEST(SqliteStore, AFlippedBlobByteFailsThatRowOnly) {
   EXPECT_EQ(diffModels(*store->model(4).value(), originals[3]), "");
   EXPECT_EQ(store->modelIds().value().size(), 4u);
   // The prefilter's index leaves out the one whose descriptors are damaged and says why.
-  const auto entries = store->matchEntries().value();
+  const auto entries = store->matchEntries(true).value();
   EXPECT_EQ(entries.entries.size(), 3u);
   ASSERT_EQ(entries.skipped.size(), 1u);
   EXPECT_THAT(entries.skipped[0].message(), HasSubstr("models row 2"));

@@ -96,7 +96,7 @@ TEST_P(StoreConformance, ModelsRoundTripBitExactAcrossReopen) {
     EXPECT_EQ(diffModels(**loaded, m), "") << "model " << m.id;
   }
   // The prefilter's view of every model, ascending id, with the segments it holds.
-  const auto entries = store->matchEntries();
+  const auto entries = store->matchEntries(true);
   ASSERT_TRUE(entries.ok()) << entries.status();
   EXPECT_TRUE(entries->skipped.empty());
   ASSERT_EQ(entries->entries.size(), 3u);

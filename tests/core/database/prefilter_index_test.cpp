@@ -229,5 +229,34 @@ TEST(PrefilterIndex, AnApproximateSearchStaysWithinItsBoundAndFindsTheRightModel
   EXPECT_EQ(same_owner, asked);
 }
 
+TEST(PrefilterIndex, GivesBackEachModelsDescriptorsThroughTreeMergesAndRebuilds) {
+  std::mt19937 rng(23);
+  PrefilterIndex index;
+  std::map<int64_t, std::vector<model::Fpfh>> models;
+  std::vector<std::pair<int64_t, std::vector<model::Fpfh>*>> loaded;
+  std::map<int64_t, std::vector<model::Fpfh>> taken;  // load() empties the lists it takes
+  for (int64_t id = 1; id <= 5; ++id) {
+    models[id] = randomDescriptors(&rng, 7 + size_t(id));
+    taken[id] = models[id];
+    loaded.emplace_back(id, &taken[id]);
+  }
+  index.load(loaded, 2);
+  std::uniform_int_distribution<int64_t> pick(1, 40);
+  for (int step = 0; step < 200; ++step) {
+    const int64_t id = pick(rng);
+    if (step % 4 == 3) {
+      index.erase(id);
+      models.erase(id);
+    } else {
+      models[id] = randomDescriptors(&rng, 1 + size_t(step % 9));
+      index.put(id, models[id]);
+    }
+    for (const auto& [m, descriptors] : models) {
+      ASSERT_EQ(index.descriptorsOf(m), descriptors) << "model " << m << " at step " << step;
+    }
+  }
+  EXPECT_TRUE(index.descriptorsOf(1000).empty());
+}
+
 }  // namespace
 }  // namespace objdb::database
