@@ -16,7 +16,9 @@
 // about time (it exits non-zero only when a stage fails).
 //
 //   frame_bench [--dataset DIR]... [--server-frames 1000] [--threads 2] [--voxel-size 0.02]
-//               [--no-server] [--db FILE]
+//               [--no-server] [--db FILE] [--shortlist N]
+// --shortlist: the server's database.shortlist (0: the descriptor vote over every model, as before
+// the short list), to compare the frame rate with and without it.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -310,6 +312,7 @@ int main(int argc, char** argv) {
   float voxel = 0.02f;
   bool server = true;
   std::string db = (std::filesystem::temp_directory_path() / "frame_bench.sqlite").string();
+  int shortlist = -1;  // database.shortlist (< 0: the default)
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--dataset" && i + 1 < argc) {
@@ -324,10 +327,12 @@ int main(int argc, char** argv) {
       server = false;
     } else if (a == "--db" && i + 1 < argc) {
       db = argv[++i];
+    } else if (a == "--shortlist" && i + 1 < argc) {
+      shortlist = std::atoi(argv[++i]);
     } else {
       std::fprintf(stderr,
                    "usage: frame_bench [--dataset DIR]... [--server-frames N] [--threads N] "
-                   "[--voxel-size M] [--no-server] [--db FILE]\n");
+                   "[--voxel-size M] [--no-server] [--db FILE] [--shortlist N]\n");
       return 2;
     }
   }
@@ -340,6 +345,7 @@ int main(int argc, char** argv) {
   }
   Params params;
   params.tsdf.voxel_size_m = voxel;
+  if (shortlist >= 0) params.database.shortlist = shortlist;  // 0: the vote over every model
   if (Status ok = params.validate(); !ok.ok()) die(std::string(ok.message()));
   std::vector<Sequence> sequences;
   for (const auto& d : dirs) sequences.push_back(loadDataset(d));
