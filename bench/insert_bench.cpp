@@ -10,7 +10,8 @@
 // descriptors jittered, see jitter()), then --inserts chairs inserted one at a time.
 // Prints per N the fill and open seconds, insert latency (median, p90, p99, max, mean; with 50
 // inserts p99 is the second slowest), candidates per insert and the share merged, then the mean
-// time of each step. Not a test: figures vary with the machine.
+// time of each step, and the wall time of 4 Match queries (ObjectDatabase::match, nothing
+// written) of chairs not inserted. Not a test: figures vary with the machine.
 //
 //   build/bin/insert_bench [--models 1000,3000,10000] [--inserts 50] [--dir /tmp]
 //   build/bin/insert_bench --db postgresql://USER@HOST/EMPTY_DB [--models 1000,3000,10000,30000]
@@ -50,6 +51,7 @@ double secondsSince(Clock::time_point t) {
 }
 
 constexpr int kKinds = 8;
+constexpr int kMatches = 4;  // Match queries per N
 constexpr float kObservationDepthM = 1.5f;
 const char* const kFillSession = "fill";
 const char* const kBenchSession = "bench";
@@ -172,6 +174,10 @@ struct Row {
   std::vector<double> ms;  // wall time of each insert
   size_t candidates = 0, merged = 0, unmatchable = 0, scene_checks = 0, scenes_missing = 0;
   database::InsertTimings timings;  // summed
+  // Match ("what is this?") of chairs not inserted: wall time, the model build's part, and how
+  // many found a model they would merge with.
+  std::vector<double> match_ms, match_build_ms;
+  size_t match_accepted = 0;
 };
 
 double quantile(std::vector<double> v, double q) {
@@ -257,6 +263,18 @@ Status run(const Options& options) {
       row.recall.add(*report);
       row.shortlist.add(*report);
     }
+    // Match of chairs that are not inserted (the next bench chairs, each drawn into the bench
+    // session's map first, as a segment to be inserted would be).
+    for (int j = 0; j < kMatches; ++j) {
+      const gsm::RawSegment segment = benchSegment(next_insert + j, bench_scene.get());
+      t = Clock::now();
+      auto report = db->match(segment, live);
+      row.match_ms.push_back(1000.0 * secondsSince(t));
+      if (!report.ok()) return annotate(report.status(), "matching a bench chair");
+      row.match_build_ms.push_back(report->timings.cloud_ms + report->timings.keypoints_ms +
+                                   report->timings.descriptors_ms);
+      row.match_accepted += !report->results.empty() && report->results.front().accepted;
+    }
     double mean = 0;
     for (const double ms : row.ms) mean += ms;
     mean /= double(row.ms.size());
@@ -274,6 +292,10 @@ Status run(const Options& options) {
                   "", (t.cloud_ms + t.keypoints_ms + t.descriptors_ms) / n, t.prefilter_ms / n,
                   t.load_ms / n, t.match_register_ms / n, t.model_verify_ms / n,
                   t.scene_verify_ms / n, t.store_ms / n);
+      std::printf("%9s Match of %d chairs not inserted: median %.0f ms (model build %.0f ms), "
+                  "%zu found a model they would merge with\n",
+                  "", kMatches, quantile(row.match_ms, 0.5), quantile(row.match_build_ms, 0.5),
+                  row.match_accepted);
       // Copies tie: the exhaustive vote breaks ties by model id, the approximate by its search.
       if (options.recall) {
         std::printf("%9s %s\n", "", row.recall.summary().c_str());

@@ -1,11 +1,15 @@
 // `objdb remote`: the query RPCs of a running objdb server — statistics, sessions, objects, one
 // object's geometry, a session's (completed) scene mesh — the on-line counterpart of `objdb db`.
+#include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
 #include "client/cli_util.h"
 #include "client/commands.h"
 #include "client/remote.h"
@@ -23,6 +27,11 @@ constexpr const char* kUsage = R"(usage: objdb remote stats    [--server HOST:PO
                              [--parts]
        objdb remote object   [--server HOST:PORT] --id ID [--out FILE.ply --what mesh|cloud]
        objdb remote scene    [--server HOST:PORT] --session NAME --out FILE.ply [--completed]
+       objdb remote match    [--server HOST:PORT] (--id ID | --cloud FILE.ply [--viewpoint X,Y,Z])
+                             [--max-results N]
+       objdb remote here     [--server HOST:PORT] --session NAME
+                             (--box X0,Y0,Z0,X1,Y1,Z1 | --ball X,Y,Z,R) [--structure]
+       objdb remote changes  [--server HOST:PORT] --from NAME --to NAME [--structure]
 
 Asks a running objdb server (objdb-server) about its database.
 
@@ -36,6 +45,16 @@ Asks a running objdb server (objdb-server) about its database.
             or its surface cloud with normals, in the object's base frame, as PLY
   scene     a session's mesh in its world frame as PLY (GetSceneMesh); --completed fills what the
             session never saw with the database's merged models
+  match     "what is this?" (Match): the stored objects a cloud (PLY: x y z, with normals and
+            colours if it has them) or a stored object (--id: find similar) would merge with,
+            each with its pose and evidence, the best first; nothing is written. A cloud without
+            normals is a sensor's, seen from --viewpoint (default its frame's origin); one with
+            normals is seen from all sides
+  here      "what is here?" (ObjectsInRegion): the objects whose placement's centre lies in a
+            box (min then max corner) or a ball (centre, radius) of a session's world, metres
+  changes   what changed between two sessions of one world (SessionChanges): objects added,
+            removed, and moved (a placement with none of the same object within 5 cm in the
+            other session)
 
 )" OBJDB_CONNECTION_USAGE R"(  --timeout S          seconds a call may take (default 600)
   -h, --help           show this text
@@ -44,7 +63,10 @@ Asks a running objdb server (objdb-server) about its database.
 struct Options {
   cli::Connection connection;
   std::string session, out, what = "mesh";
-  long long id = 0;
+  long long id = 0, max_results = 10;
+  std::string cloud, from, to;
+  std::optional<Eigen::Vector3d> viewpoint;
+  std::vector<double> box, ball;  // 6 and 4 numbers
   bool merged = false, completed = false, structure = false, parts = false;
   double timeout_s = 600.0;
 };
@@ -214,6 +236,128 @@ int scene(v1::ObjectDatabase::Stub& stub, const Options& o) {
   return 0;
 }
 
+// Comma-separated finite numbers, exactly `count` of them.
+bool parseNumbers(const std::string& text, size_t count, std::vector<double>* out) {
+  out->clear();
+  for (absl::string_view part : absl::StrSplit(text, ',')) {
+    double x = 0.0;
+    if (!absl::SimpleAtod(part, &x) || !std::isfinite(x)) return false;
+    out->push_back(x);
+  }
+  return out->size() == count;
+}
+
+std::string place(const v1::Vector3& v) {
+  return absl::StrFormat("(%.2f, %.2f, %.2f)", v.x(), v.y(), v.z());
+}
+
+int here(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  v1::ObjectsInRegionRequest request;
+  request.set_session_name(o.session);
+  request.set_include_structure(o.structure);
+  if (!o.box.empty()) {
+    server::setVector({o.box[0], o.box[1], o.box[2]}, request.mutable_box()->mutable_min());
+    server::setVector({o.box[3], o.box[4], o.box[5]}, request.mutable_box()->mutable_max());
+  } else {
+    server::setVector({o.ball[0], o.ball[1], o.ball[2]}, request.mutable_ball()->mutable_centre());
+    request.mutable_ball()->set_radius_m(o.ball[3]);
+  }
+  grpc::ClientContext context;
+  cli::setDeadline(&context, o.timeout_s);
+  v1::ObjectsInRegionResponse r;
+  const grpc::Status status = stub.ObjectsInRegion(&context, request, &r);
+  if (!status.ok()) {
+    return cli::reportRpcError(kCommand, "ObjectsInRegion", o.connection.server, status);
+  }
+  std::printf("%8s %-9s %-22s %-22s  %s\n", "id", "surface", "centre (m)", "extent (m)", "sessions");
+  for (const auto& p : r.placements()) {
+    const auto& m = p.object();
+    std::printf("%8llu %-9s %-22s %-22s  %s\n", (unsigned long long)m.id(),
+                m.structure() ? "structure" : m.planar() ? "planar" : "object",
+                place(p.centre_world()).c_str(), extent(p.bounds_world()).c_str(),
+                absl::StrJoin(m.session_names(), ", ").c_str());
+  }
+  std::printf("%d placements in the region of session %s\n", r.placements_size(),
+              o.session.c_str());
+  return 0;
+}
+
+int changes(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  v1::SessionChangesRequest request;
+  request.set_from_session(o.from);
+  request.set_to_session(o.to);
+  request.set_include_structure(o.structure);
+  grpc::ClientContext context;
+  cli::setDeadline(&context, o.timeout_s);
+  v1::SessionChangesResponse r;
+  const grpc::Status status = stub.SessionChanges(&context, request, &r);
+  if (!status.ok()) {
+    return cli::reportRpcError(kCommand, "SessionChanges", o.connection.server, status);
+  }
+  auto list = [](const char* what, const auto& changes) {
+    for (const auto& c : changes) {
+      std::string where;
+      for (const auto& p : c.after().empty() ? c.before() : c.after()) {
+        where += absl::StrFormat(" (%.2f, %.2f, %.2f)", p.x(), p.y(), p.z());
+      }
+      std::printf("%-8s %8llu%s%s\n", what, (unsigned long long)c.object().id(),
+                  c.moved_m() > 0.0 ? absl::StrFormat(" by %.2f m, now at", c.moved_m()).c_str()
+                                    : " at",
+                  where.c_str());
+    }
+  };
+  list("added", r.added());
+  list("removed", r.removed());
+  list("moved", r.moved());
+  std::printf("from %s to %s: %d added, %d removed, %d moved, %u unchanged\n", o.from.c_str(),
+              o.to.c_str(), r.added_size(), r.removed_size(), r.moved_size(), r.unchanged());
+  return 0;
+}
+
+int match(v1::ObjectDatabase::Stub& stub, const Options& o) {
+  v1::MatchRequest request;
+  request.set_max_results(uint32_t(o.max_results));
+  if (!o.cloud.empty()) {
+    auto read = io::readMesh(o.cloud);
+    if (!read.ok()) return cli::reportError(kCommand, read.status());
+    PointCloud cloud{read->vertices, read->normals, read->colors};
+    server::toProto(cloud, request.mutable_cloud());
+    if (o.viewpoint) server::setVector(*o.viewpoint, request.mutable_viewpoint());
+  } else {
+    request.set_object_id(uint64_t(o.id));
+  }
+  grpc::ClientContext context;
+  cli::setDeadline(&context, o.timeout_s);
+  v1::MatchResponse r;
+  const grpc::Status status = stub.Match(&context, request, &r);
+  if (!status.ok()) return cli::reportRpcError(kCommand, "Match", o.connection.server, status);
+  const std::string what =
+      o.cloud.empty() ? "object " + std::to_string(o.id) : "cloud " + o.cloud;
+  std::printf("%s: %u surface points, %u keypoints; %u models voted over%s, %u candidates "
+              "evaluated in %.2f s\n",
+              what.c_str(), r.points(), r.keypoints(), r.shortlist(),
+              r.shortlist() == 0 ? " (all)" : "", r.candidates(), r.elapsed_s());
+  if (!r.matchable()) {
+    std::printf("not matched: %s\n", r.reason().c_str());
+    return 0;
+  }
+  size_t accepted = 0;
+  for (const auto& m : r.results()) {
+    const auto& T = m.t_object_query();
+    const auto& e = m.evidence();
+    accepted += m.accepted() ? 1 : 0;
+    std::printf("%8llu %-9s inliers %4u, e_ICP %.4f m, e_TSDF %.4f m, o_TSDF %6llu, %u scene "
+                "checks; query at (%.3f, %.3f, %.3f), q (%.4f, %.4f, %.4f, %.4f) in its frame\n",
+                (unsigned long long)m.object_id(), m.accepted() ? "match" : m.stage().c_str(),
+                m.inliers(), e.icp_rmse_m(), e.tsdf_rmse_m(),
+                (unsigned long long)e.overlap_voxels(), e.scene_checks(), T.x(), T.y(), T.z(),
+                T.qx(), T.qy(), T.qz(), T.qw());
+    if (!m.accepted()) std::printf("         %s\n", m.reason().c_str());
+  }
+  std::printf("%zu of %d shown would merge\n", accepted, r.results_size());
+  return 0;
+}
+
 }  // namespace
 
 int runRemoteCommand(int argc, char** argv) {
@@ -265,6 +409,28 @@ int runRemoteCommand(int argc, char** argv) {
       if (!cli::parseInt(value, 1, INT64_MAX, &o.id)) {
         return cli::usageError(kCommand, std::string("--id needs a positive integer, got ") + value, kUsage);
       }
+    } else if (a == "--box" || a == "--ball") {
+      const bool box = a == "--box";
+      if (!parseNumbers(value, box ? 6 : 4, box ? &o.box : &o.ball)) {
+        return cli::usageError(kCommand, a + (box ? " needs X0,Y0,Z0,X1,Y1,Z1" : " needs X,Y,Z,R") +
+                                             " in metres, got " + value, kUsage);
+      }
+    } else if (a == "--from") {
+      o.from = value;
+    } else if (a == "--to") {
+      o.to = value;
+    } else if (a == "--cloud") {
+      o.cloud = value;
+    } else if (a == "--viewpoint") {
+      std::vector<double> xyz;
+      if (!parseNumbers(value, 3, &xyz)) {
+        return cli::usageError(kCommand, std::string("--viewpoint needs X,Y,Z in metres, got ") + value, kUsage);
+      }
+      o.viewpoint = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+    } else if (a == "--max-results") {
+      if (!cli::parseInt(value, 0, 1000, &o.max_results)) {
+        return cli::usageError(kCommand, std::string("--max-results needs 0..1000 (0: all), got ") + value, kUsage);
+      }
     } else if (a == "--timeout") {
       if (!cli::parseInt(value, 1, 86400, &seconds)) {
         return cli::usageError(kCommand, std::string("--timeout needs 1..86400 seconds, got ") + value, kUsage);
@@ -288,6 +454,29 @@ int runRemoteCommand(int argc, char** argv) {
   if (action == "object") {
     if (o.id == 0) return cli::usageError(kCommand, "object needs --id ID", kUsage);
     return object(*stub, o);
+  }
+  if (action == "match") {
+    if ((o.id == 0) == o.cloud.empty()) {
+      return cli::usageError(kCommand, "match needs --id ID or --cloud FILE.ply (one of them)",
+                             kUsage);
+    }
+    if (o.viewpoint && o.cloud.empty()) {
+      return cli::usageError(kCommand, "--viewpoint goes with --cloud", kUsage);
+    }
+    return match(*stub, o);
+  }
+  if (action == "here") {
+    if (o.session.empty() || o.box.empty() == o.ball.empty()) {
+      return cli::usageError(kCommand, "here needs --session NAME and --box or --ball (one)",
+                             kUsage);
+    }
+    return here(*stub, o);
+  }
+  if (action == "changes") {
+    if (o.from.empty() || o.to.empty()) {
+      return cli::usageError(kCommand, "changes needs --from NAME and --to NAME", kUsage);
+    }
+    return changes(*stub, o);
   }
   if (action == "scene") {
     if (o.session.empty() || o.out.empty()) {

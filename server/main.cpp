@@ -52,7 +52,8 @@ options:
   --max-sessions N        sessions whose map is in memory at once (streaming, or not ended yet),
                           1..%d (default %d); one more Ingest gets RESOURCE_EXHAUSTED
   --query-threads N       threads that run the queries (ListSessions, ListObjects, GetObject,
-                          GetStats), off gRPC's threads, 1..64 (default 4)
+                          GetStats, Match, ObjectsInRegion, SessionChanges), off gRPC's
+                          threads, 1..64 (default 4)
   --query-queue N         queries that may wait for one of them, 1..100000 (default 256); one
                           more is refused at once with RESOURCE_EXHAUSTED ("the server is busy")
   --auto-end-s N          end a session whose stream closed or broke after N seconds without

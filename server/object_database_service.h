@@ -139,6 +139,16 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
       Context* context, const v1::GetSceneMeshRequest* request) override;
   grpc::ServerUnaryReactor* GetStats(Context* context, const v1::GetStatsRequest* request,
                                      v1::GetStatsResponse* response) override;
+  // On the query pool (match_query.cpp), beside the database thread's inserts.
+  grpc::ServerUnaryReactor* Match(Context* context, const v1::MatchRequest* request,
+                                  v1::MatchResponse* response) override;
+  // "What is here?" (region_queries.cpp), on the query pool.
+  grpc::ServerUnaryReactor* ObjectsInRegion(Context* context,
+                                            const v1::ObjectsInRegionRequest* request,
+                                            v1::ObjectsInRegionResponse* response) override;
+  grpc::ServerUnaryReactor* SessionChanges(Context* context,
+                                           const v1::SessionChangesRequest* request,
+                                           v1::SessionChangesResponse* response) override;
 
  private:
   friend class SceneMeshReactor;
@@ -270,7 +280,9 @@ class ObjectDatabaseService final : public v1::ObjectDatabase::CallbackService {
 
   const ServiceOptions options_;
   storage::Store* store_;
-  std::unique_ptr<database::ObjectDatabase> db_;  // used on the database thread only
+  // Inserts and withdrawals on the database thread only; Match reads it on the query pool
+  // (ObjectDatabase::match is safe beside inserts).
+  std::unique_ptr<database::ObjectDatabase> db_;
   PublishedScenes published_scenes_{store_};  // live maps across servers
   // Another server holds a session lease on this (shared) database: extractions publish their
   // maps (LiveSession::publish_scenes points here).

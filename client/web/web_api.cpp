@@ -316,6 +316,28 @@ Reply WebApi::stats(const Query& query) {
   return Reply{200, "application/json", json(response)};
 }
 
+Reply WebApi::similar(const std::string& id_text, const Query& query) {
+  Reply failed;
+  uint64_t id = 0;
+  if (!onlyKeys(query, {"max_results"}, &failed) || !objectId(id_text, &id, &failed)) return failed;
+  v1::MatchRequest request;
+  request.set_object_id(id);
+  request.set_max_results(10);
+  if (const auto it = query.find("max_results"); it != query.end()) {
+    uint32_t n = 0;
+    if (!absl::SimpleAtoi(it->second, &n) || n > 1000) {
+      return error(400, "max_results must be 0..1000 (0: every candidate), got '" + it->second + "'");
+    }
+    request.set_max_results(n);
+  }
+  grpc::ClientContext context;
+  deadline(&context, scene_timeout_s_);  // a match runs the whole verification: allow a scene's time
+  v1::MatchResponse response;
+  const grpc::Status s = stub_->Match(&context, request, &response);
+  if (!s.ok()) return fromGrpc(s, "Match");
+  return Reply{200, "application/json", json(response)};
+}
+
 Reply WebApi::viewer(const Query& query) {
   Reply failed;
   if (!onlyKeys(query, {}, &failed)) return failed;

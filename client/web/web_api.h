@@ -12,6 +12,8 @@
 //                                                  datasets it was given (objdb web --dataset)
 //   GET /api/objects/{id}/sheet.png                the model's merge-sheet row (merge_sheet.h):
 //                                                  its placements over those datasets' frames
+//   GET /api/objects/{id}/similar?max_results=     Match of the stored object ("find similar"):
+//                                                  the objects it would merge with, and why not
 // Answers: 200 with JSON, PLY or PNG; else a JSON {"error": "...", "grpc_code": "..."} with
 // 400 (malformed path or query parameters), 404 (unknown object or session), 503 (the objdb
 // server is down or overloaded, with its gRPC message), 504 (its deadline passed) or 502
@@ -54,6 +56,7 @@ class WebApi {
   Reply stats(const Query& query);
   Reply viewer(const Query& query);
   Reply sheet(const std::string& id, const Query& query);
+  Reply similar(const std::string& id, const Query& query);
 
   // A JSON error reply.
   static Reply error(int status, const std::string& message, const std::string& grpc_code = "");

@@ -166,6 +166,10 @@ StatusOr<std::unique_ptr<WebServer>> WebServer::start(std::shared_ptr<grpc::Chan
            [&api](const httplib::Request& req, httplib::Response& res) {
              send(api.sheet(req.matches[1], req.params), res);
            });
+  http.Get(R"(/api/objects/([^/]+)/similar)",
+           [&api](const httplib::Request& req, httplib::Response& res) {
+             send(api.similar(req.matches[1], req.params), res);
+           });
   http.Get("/api/viewer", [&api](const httplib::Request& req, httplib::Response& res) {
     send(api.viewer(req.params), res);
   });

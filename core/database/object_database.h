@@ -143,6 +143,29 @@ struct InsertReport {
   std::vector<int64_t> shortlist, global_ranking;
 };
 
+// "What is this?" (ObjectDatabase::match): a segment checked against the stored models as an
+// insert checks it, nothing written.
+struct MatchReport {
+  // As InsertReport's: a segment with no surface at the mesh weight has no model (not an error),
+  // a planar or structure one is not matched (matchable false, no results).
+  bool unusable = false;
+  std::string unusable_reason;
+  bool planar = false, structure = false, matchable = false;
+  size_t points = 0, keypoints = 0;  // the segment's model: surface points, described keypoints
+  // The models the descriptor vote ran over (DatabaseParams::shortlist; empty with shortlist 0:
+  // every model), and the vote's candidates, each evaluated (registration, model check, colour,
+  // scene check at every pose of the candidate and of a stored query model), no
+  // stop_after_accepted.
+  std::vector<int64_t> shortlist;
+  // Accepted first, the lowest e_TSDF first; then the others by how far they got (rejected at
+  // the scene check, by colour, at the model check, at registration), in vote order within each.
+  // A result's registration.T_target_source takes the segment frame into the candidate's model
+  // frame.
+  std::vector<CandidateResult> results;
+  size_t unreadable_candidates = 0;  // candidates whose stored data failed to load (skipped)
+  InsertTimings timings;             // P, K, D, the prefilter, loading and the candidates' steps
+};
+
 class ObjectDatabase {
  public:
   // Params are validated. The store outlives the database. The database keeps every matchable
@@ -169,6 +192,18 @@ class ObjectDatabase {
     bool removed = false;  // it was that model's only segment: the store removed the model
   };
   StatusOr<Withdrawal> withdrawSegment(const std::string& session, gsm::Label label);
+
+  // "What is this?": the segment's model (query_segment.h makes segments of depth images and
+  // clouds) matched against every stored model an insert would consider, each candidate
+  // evaluated as an insert evaluates it; nothing is written. Its frame is the segment's
+  // (segment.T_world_segment places it in the query's frame). The model's structure is judged
+  // from the segment alone (no session's scene to grow its plane through). Safe alongside
+  // inserts (it reads what they write under the same locks).
+  StatusOr<MatchReport> match(const gsm::RawSegment& segment, const LiveScenes& live = {});
+  // The same for stored model `model_id` against the others ("find similar"): its own poses are
+  // verified against their scenes too, as a merge would. NOT_FOUND: no such model, or not
+  // active.
+  StatusOr<MatchReport> matchModel(int64_t model_id, const LiveScenes& live = {});
 
   // Candidate model ids for a model (the prefilter alone; for benchmarks of its recall).
   // `exhaustive`: the vote over every stored descriptor's exact distance (linear in their
@@ -224,6 +259,9 @@ class ObjectDatabase {
   void verifyRegistered(const model::ObjectModel& incoming, const model::ObjectModel& candidate,
                         const Thresholds& thresholds, const LiveScenes& live,
                         InsertTimings* timings, CandidateResult* out);
+  // match() and matchModel() once the query's model is built (object_database_match.cpp).
+  Status matchIncoming(const model::ObjectModel& incoming, const Thresholds& thresholds,
+                       const LiveScenes& live, MatchReport* report);
   // DatabaseParams::merge_co_accepted, after the segment merged into `merged` (best): the other
   // accepted candidates (`loaded` in report->results' order) verified onto it and merged in.
   Status absorbCoAccepted(std::shared_ptr<const model::ObjectModel> merged,
@@ -252,7 +290,12 @@ class ObjectDatabase {
   Params params_;
   ModelStore* store_;
   std::mutex mutex_;  // guards the caches below
-  std::map<int64_t, std::shared_ptr<const matching::DescriptorIndex>> indices_;
+  // Each model's descriptor index, with a fingerprint of the descriptors it was built from.
+  struct CachedIndex {
+    uint64_t fingerprint = 0;
+    std::shared_ptr<const matching::DescriptorIndex> index;
+  };
+  std::map<int64_t, CachedIndex> indices_;
   // Decoded models, most recently used first; a model's entry goes when it changes (changed()).
   static constexpr size_t kCachedModels = 32;
   std::list<std::shared_ptr<const model::ObjectModel>> models_;

@@ -14,6 +14,7 @@
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 #include <pcl/registration/icp.h>
+#include <pcl/registration/transformation_estimation_point_to_plane_lls.h>
 #include <pcl/search/kdtree.h>
 
 #include "absl/strings/str_format.h"
@@ -45,6 +46,31 @@ pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const PointCloud& cloud, size
   }
   return out;
 }
+
+// Point-to-plane least squares that never hands ICP a non-finite step. On a degenerate set of
+// correspondences (a few pairs whose normals span no 3-D system) PCL's solve can return NaN;
+// ICP would then move every source point to NaN and PCL's kd-tree asserts on them, which would
+// end the process. A non-finite step is replaced by no step: ICP stops there (converged, the
+// transform unchanged) and e_ICP judges that transform like any other.
+class FiniteStepPointToPlane
+    : public pcl::registration::TransformationEstimationPointToPlaneLLS<pcl::PointNormal,
+                                                                        pcl::PointNormal, float> {
+ public:
+  using Base = pcl::registration::TransformationEstimationPointToPlaneLLS<pcl::PointNormal,
+                                                                          pcl::PointNormal, float>;
+  using Base::estimateRigidTransformation;
+  void estimateRigidTransformation(const pcl::PointCloud<pcl::PointNormal>& source,
+                                   const pcl::PointCloud<pcl::PointNormal>& target,
+                                   const pcl::Correspondences& correspondences,
+                                   Matrix4& transformation) const override {
+    Base::estimateRigidTransformation(source, target, correspondences, transformation);
+    if (!transformation.allFinite()) {
+      ++degenerate_steps;
+      transformation.setIdentity();
+    }
+  }
+  mutable size_t degenerate_steps = 0;
+};
 
 }  // namespace
 
@@ -240,6 +266,12 @@ void refineInto(const model::ObjectModel& source, const model::ObjectModel& targ
   // Point-to-plane ICP from the initial (coarse) transform.
   const auto t = Clock::now();
   pcl::IterativeClosestPointWithNormals<pcl::PointNormal, pcl::PointNormal> icp;
+  const auto step = std::make_shared<FiniteStepPointToPlane>();
+  icp.setTransformationEstimation(step);
+  if (!r.T_coarse.matrix().allFinite()) {
+    r.reason = "the coarse transform is not finite";
+    return;
+  }
   // ICP moves the source: a thinned source (at most icp_max_source_points) against the full
   // target keeps its cost bounded without losing the target's detail.
   icp.setInputSource(withNormals(

@@ -104,6 +104,46 @@ TEST(StreamCommand, StreamedSessionsBuildWhatIngestBuildsAndRemoteDescribesThem)
   EXPECT_TRUE(contains(r.out, "seen in monday")) << r.out;
   EXPECT_TRUE(contains(r.out, "part ")) << r.out;  // GetObject lists its parts
   EXPECT_GT(fs::file_size(cloud), 1000u);
+  // "What is this?": a box's own cloud finds the box; nothing is written.
+  int64_t box = 0;
+  for (const int64_t id : served_ids) {
+    const auto m = server->store().model(id).value();
+    if (box == 0 && !m->structure && !m->planar) box = id;
+  }
+  ASSERT_NE(box, 0);
+  const fs::path box_cloud = dir / "box.ply";
+  r = runProcess({kObjdb, "remote", "object", "--server", address, "--id", std::to_string(box),
+                  "--out", box_cloud.string(), "--what", "cloud"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = runProcess({kObjdb, "remote", "match", "--server", address, "--cloud", box_cloud.string()});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, absl::StrCat(" ", box, " match "))) << r.out;
+  r = runProcess({kObjdb, "remote", "match", "--server", address, "--id", std::to_string(box)});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "candidates evaluated")) << r.out;
+  EXPECT_EQ(server->store().modelIds().value(), served_ids);
+  // "What is here?" and what changed between the days.
+  r = runProcess({kObjdb, "remote", "here", "--server", address, "--session", "tuesday", "--ball",
+                  "0,0,0,100"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, absl::StrCat(" ", box, " object "))) << r.out;
+  EXPECT_TRUE(contains(r.out, "placements in the region of session tuesday")) << r.out;
+  r = runProcess({kObjdb, "remote", "here", "--server", address, "--session", "tuesday", "--box",
+                  "1,0,0,0,1,1"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "box.min.x 1 > box.max.x 0")) << r.err;
+  r = runProcess({kObjdb, "remote", "here", "--server", address, "--session", "tuesday"});
+  EXPECT_EQ(r.exit_code, 2);
+  r = runProcess({kObjdb, "remote", "changes", "--server", address, "--from", "monday", "--to",
+                  "tuesday"});
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "from monday to tuesday: ")) << r.out;
+  r = runProcess({kObjdb, "remote", "match", "--server", address});
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "match needs --id ID or --cloud FILE.ply")) << r.err;
+  r = runProcess({kObjdb, "remote", "match", "--server", address, "--id", "99999"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "NOT_FOUND")) << r.err;
   const fs::path scene = dir / "scene.ply";
   r = runProcess({kObjdb, "remote", "scene", "--server", address, "--session", "tuesday", "--out",
                   scene.string(), "--completed"});

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Iterator, List, Optional, Union
 
 import grpc
+import numpy as np
 
 from objdb import types
 from objdb.frames import Dataset, Frame, frame_to_proto
@@ -300,6 +301,84 @@ class Client:
             return Mesh.concatenate(Mesh.from_proto(c.mesh) for c in chunks)
         except grpc.RpcError as e:
             raise _error(e, "GetSceneMesh") from None
+
+    def match(self, cloud=None, *, normals=None, colors=None, viewpoint=None, depth=None,
+              intrinsics: Optional[Intrinsics] = None, mask=None, pose=None,
+              depth_scale: float = 0.001, object_id: Optional[int] = None,
+              max_results: int = 10, timeout: Optional[float] = 600.0) -> types.MatchAnswer:
+        """"What is this?" (Match): the stored objects a segment would merge with, with poses and
+        evidence; nothing is written. Give one of
+          cloud: N x 3 points (metres; normals N x 3 and colors N x 3 uint8 optional); a cloud
+                 without normals is a sensor's, seen from viewpoint (default its origin), one
+                 with normals is seen from all sides;
+          depth: an H x W uint16 (depth_scale metres per unit) or float32 image with intrinsics,
+                 mask (H x W, non-zero = the segment; default all) and pose (4 x 4
+                 T_world_camera, default identity);
+          object_id: a stored object ("find similar")."""
+        given = [cloud is not None, depth is not None, object_id is not None]
+        if sum(given) != 1:
+            raise ValueError("match: give one of cloud, depth or object_id")
+        request = pb.MatchRequest(max_results=max_results)
+        if cloud is not None:
+            points = np.asarray(cloud, dtype=np.float32)
+            if points.ndim != 2 or points.shape[1] != 3:
+                raise ValueError(f"match: cloud must be N x 3 (got shape {points.shape})")
+            request.cloud.SetInParent()  # an empty cloud is still a cloud (the server says so)
+            request.cloud.points.extend(points.ravel().tolist())
+            if normals is not None:
+                request.cloud.normals.extend(np.asarray(normals, np.float32).ravel().tolist())
+            if colors is not None:
+                request.cloud.colors = np.asarray(colors, np.uint8).tobytes()
+            if viewpoint is not None:
+                x, y, z = (float(v) for v in viewpoint)
+                request.viewpoint.x, request.viewpoint.y, request.viewpoint.z = x, y, z
+        elif depth is not None:
+            if intrinsics is None:
+                raise ValueError("match: a depth query needs its intrinsics")
+            frame = frame_to_proto(Frame(depth=depth, pose=np.eye(4) if pose is None else pose),
+                                   0, intrinsics, depth_scale)
+            d = request.depth
+            d.intrinsics.CopyFrom(intrinsics.to_proto())
+            d.depth.CopyFrom(frame.depth)
+            if pose is not None:
+                d.T_world_camera.CopyFrom(frame.T_world_camera)
+            if mask is not None:
+                m = np.asarray(mask)
+                if m.shape != (intrinsics.height, intrinsics.width):
+                    raise ValueError(f"match: mask has shape {m.shape}, the intrinsics say "
+                                     f"{(intrinsics.height, intrinsics.width)} (height, width)")
+                d.mask = (m != 0).astype(np.uint8).tobytes()
+        else:
+            request.object_id = int(object_id)
+        return types.MatchAnswer.from_proto(self._call("Match", request, timeout))
+
+    def objects_in_region(self, session: str, box=None, ball=None,
+                          include_structure: bool = False) -> List[types.PlacedObject]:
+        """"What is here?" (ObjectsInRegion): the objects whose placement's centre lies in a box
+        ((min xyz, max xyz)) or a ball ((centre xyz, radius)) of the session's world, metres."""
+        if (box is None) == (ball is None):
+            raise ValueError("objects_in_region: give a box or a ball")
+        request = pb.ObjectsInRegionRequest(session_name=session,
+                                            include_structure=include_structure)
+        if box is not None:
+            lo, hi = (np.asarray(c, dtype=float).reshape(3) for c in box)
+            request.box.min.x, request.box.min.y, request.box.min.z = lo
+            request.box.max.x, request.box.max.y, request.box.max.z = hi
+        else:
+            centre, radius = ball
+            request.ball.centre.x, request.ball.centre.y, request.ball.centre.z = (
+                float(v) for v in centre)
+            request.ball.radius_m = float(radius)
+        response = self._call("ObjectsInRegion", request)
+        return [types.PlacedObject.from_proto(p) for p in response.placements]
+
+    def changes(self, from_session: str, to_session: str,
+                include_structure: bool = False) -> types.SessionChanges:
+        """What changed between two sessions of one world (SessionChanges): objects added,
+        removed, moved (no placement of the same object within 5 cm in the other session)."""
+        request = pb.SessionChangesRequest(from_session=from_session, to_session=to_session,
+                                           include_structure=include_structure)
+        return types.SessionChanges.from_proto(self._call("SessionChanges", request))
 
     def stats(self) -> dict:
         """The server's statistics (GetStats) as a dict."""

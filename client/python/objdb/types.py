@@ -247,3 +247,99 @@ class ObjectDetail:
             PointCloud.from_proto(d.cloud) if d.HasField("cloud") else None,
             Mesh.from_proto(d.mesh) if d.HasField("mesh") else None,
             [MergeEvidence.from_proto(m) for m in d.merges], to_dict(d.stats), d)
+
+
+@dataclass
+class MatchResult:
+    """One stored object a Match query was checked against. accepted: every check of a merge
+    passed. stage: where it stopped otherwise ("registration", "model", "colour", "scene").
+    T_object_query (4 x 4): the query's frame into the object's base frame."""
+
+    object_id: int
+    accepted: bool
+    stage: str
+    reason: str
+    T_object_query: np.ndarray
+    inliers: int
+    evidence: MergeEvidence
+    proto: pb.MatchResult = field(repr=False)
+
+    @staticmethod
+    def from_proto(m: pb.MatchResult) -> "MatchResult":
+        from objdb.geometry import pose_to_matrix
+        return MatchResult(m.object_id, m.accepted, m.stage, m.reason,
+                           pose_to_matrix(m.T_object_query), m.inliers,
+                           MergeEvidence.from_proto(m.evidence), m)
+
+
+@dataclass
+class MatchAnswer:
+    """What Match said: the results, accepted first (the lowest e_TSDF first), then the rest in
+    vote order; matchable False (and reason) when the query is no matchable object."""
+
+    matchable: bool
+    reason: str
+    points: int
+    keypoints: int
+    shortlist: int
+    candidates: int
+    results: List[MatchResult]
+    elapsed_s: float
+
+    @staticmethod
+    def from_proto(r: pb.MatchResponse) -> "MatchAnswer":
+        return MatchAnswer(r.matchable, r.reason, r.points, r.keypoints, r.shortlist,
+                           r.candidates, [MatchResult.from_proto(m) for m in r.results],
+                           r.elapsed_s)
+
+
+@dataclass
+class PlacedObject:
+    """An object placed in a session's world (ObjectsInRegion): its summary, T_world_object
+    (4 x 4), the model's box centre in the world and the world box holding it (min, max)."""
+
+    object: ObjectSummary
+    T_world_object: np.ndarray
+    centre: np.ndarray
+    bounds: Tuple[np.ndarray, np.ndarray]
+
+    @staticmethod
+    def from_proto(p: pb.PlacedObject) -> "PlacedObject":
+        from objdb.geometry import pose_to_matrix
+        c = p.centre_world
+        return PlacedObject(ObjectSummary.from_proto(p.object), pose_to_matrix(p.T_world_object),
+                            np.array([c.x, c.y, c.z]), _box(p.bounds_world))
+
+
+@dataclass
+class ObjectChange:
+    """One object's placements in two sessions (T_world_object, N x 4 x 4 each) and, when it
+    moved, the distance (m)."""
+
+    object: ObjectSummary
+    before: np.ndarray
+    after: np.ndarray
+    moved_m: float
+
+    @staticmethod
+    def from_proto(c: pb.ObjectChange) -> "ObjectChange":
+        from objdb.geometry import pose_to_matrix
+        poses = lambda ps: np.array([pose_to_matrix(p) for p in ps]).reshape(-1, 4, 4)
+        return ObjectChange(ObjectSummary.from_proto(c.object), poses(c.before), poses(c.after),
+                            c.moved_m)
+
+
+@dataclass
+class SessionChanges:
+    """What changed from one session to another of the same world (SessionChanges)."""
+
+    added: List[ObjectChange]
+    removed: List[ObjectChange]
+    moved: List[ObjectChange]
+    unchanged: int
+
+    @staticmethod
+    def from_proto(r: pb.SessionChangesResponse) -> "SessionChanges":
+        return SessionChanges([ObjectChange.from_proto(c) for c in r.added],
+                              [ObjectChange.from_proto(c) for c in r.removed],
+                              [ObjectChange.from_proto(c) for c in r.moved], r.unchanged)

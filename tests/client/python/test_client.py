@@ -114,6 +114,59 @@ def test_a_dataset_streams_and_its_objects_come_back_where_the_scene_saw_them(se
                 (3 if o.mesh.colors is not None else 0)
             assert len(body) == len(o.mesh.vertices) * stride + len(o.mesh.faces) * 13
 
+        # "What is this?": an object's own cloud, moved, finds the object at the inverse pose;
+        # nothing is written.
+        o = db.object(objects[0].id, mesh=False)
+        T = np.eye(4)
+        T[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]
+        T[:3, 3] = [0.3, -0.2, 0.1]
+        points = o.cloud.points @ T[:3, :3].T + T[:3, 3]
+        normals = o.cloud.normals @ T[:3, :3].T
+        answer = db.match(points, normals=normals, max_results=3)
+        assert answer.matchable, answer.reason
+        assert answer.results and answer.results[0].object_id == o.id
+        best = answer.results[0]
+        assert best.accepted, best.reason
+        assert best.T_object_query.shape == (4, 4)
+        assert best.evidence.tsdf_rmse_m <= 0.02
+        # A box is symmetric: any of its turns is right; the surface must land on the model's.
+        moved = points[::50] @ best.T_object_query[:3, :3].T + best.T_object_query[:3, 3]
+        d2 = ((moved[:, None, :] - o.cloud.points[None, ::10, :]) ** 2).sum(axis=2)
+        assert np.median(np.sqrt(d2.min(axis=1))) < 0.02
+        assert [x.id for x in db.objects()] == [x.id for x in objects]
+        assert db.match(object_id=o.id).candidates >= 0
+        with pytest.raises(ValueError):
+            db.match()
+        with pytest.raises(objdb.Error) as e:
+            db.match(np.zeros((0, 3)))
+        assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT
+        assert "cloud.points" in e.value.message
+        with pytest.raises(objdb.Error) as e:
+            db.match(object_id=987654)
+        assert e.value.code == grpc.StatusCode.NOT_FOUND and "object_id" in e.value.message
+
+        # "What is here?": the object's own place, a ball around its centre in the session.
+        lo, hi = o.summary.bounds
+        centre = o.poses[0][:3, :3] @ ((lo + hi) / 2) + o.poses[0][:3, 3]
+        placed = db.objects_in_region("boxes", ball=(centre, 0.05))
+        assert o.id in [p.object.id for p in placed]
+        here = next(p for p in placed if p.object.id == o.id)
+        assert np.allclose(here.centre, centre, atol=1e-6)
+        assert here.T_world_object.shape == (4, 4)
+        far = db.objects_in_region("boxes", box=(centre + 10, centre + 11))
+        assert far == []
+        with pytest.raises(objdb.Error) as e:
+            db.objects_in_region("boxes", box=(centre + 1, centre))
+        assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "box.min" in e.value.message
+        with pytest.raises(ValueError):
+            db.objects_in_region("boxes")
+        with pytest.raises(objdb.Error) as e:
+            db.changes("boxes", "boxes")
+        assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT and "to_session" in e.value.message
+        with pytest.raises(objdb.Error) as e:
+            db.changes("boxes", "nobody")
+        assert e.value.code == grpc.StatusCode.NOT_FOUND and "nobody" in e.value.message
+
         no_geometry = db.object(objects[0].id, mesh=False, cloud=False)
         assert no_geometry.mesh is None and no_geometry.cloud is None
 

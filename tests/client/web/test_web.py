@@ -159,6 +159,18 @@ def test_every_page_loads_and_draws(lounge, browser):
     browser.save_screenshot(str(ARTIFACTS / "object-with-sheet.png"))
     rendered = browser.execute_script("return document.body.dataset.renderedMs;")
     print(f"object page: {seconds:.2f} s, first render {rendered} ms after navigation start")
+    # "Find similar" (Match of the stored object): an answer, a table or the reason.
+    browser.find_element("id", "find-similar").click()
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not browser.execute_script(
+            "return document.body.dataset.similar;"):
+        time.sleep(0.1)
+    assert browser.execute_script("return document.body.dataset.similar;") not in (None, "error")
+    assert browser.find_element("id", "similar").text.strip()
+    status, body = get_json(f"{lounge.url}/api/objects/{target}/similar?max_results=3")
+    assert status == 200 and body["matchable"] and len(body.get("results", [])) <= 3
+    for r in body.get("results", []):
+        assert r["object_id"] != target and "evidence" in r
 
     session = merged[0]["session_names"][0]
     for completed in (0, 1):
@@ -197,6 +209,10 @@ def test_bad_requests_get_clear_http_errors(lounge, tmp_path):
     assert status == 404
     status, body = get_json(f"{lounge.url}/api/objects/987654/sheet.png")
     assert status == 404
+    status, body = get_json(f"{lounge.url}/api/objects/987654/similar")
+    assert status == 404 and "object_id" in body["error"]
+    status, body = get_json(f"{lounge.url}/api/objects/1/similar?max_results=many")
+    assert status == 400 and "max_results" in body["error"]
     request = urllib.request.Request(f"{lounge.url}/api/stats", method="POST", data=b"x")
     with pytest.raises(urllib.error.HTTPError) as e:
         urllib.request.urlopen(request, timeout=30)
