@@ -4,12 +4,9 @@
 #include "core/database/parallel_for.h"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
-#include <functional>
 #include <set>
-#include <thread>
 
 #include "absl/strings/str_format.h"
 #include "core/common/logging.h"

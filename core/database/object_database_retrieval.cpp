@@ -126,6 +126,11 @@ std::vector<int64_t> ObjectDatabase::shortlistFor(const std::vector<float>& glob
 StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::ObjectModel& model,
                                                              bool exhaustive,
                                                              std::vector<int64_t>* shortlist) {
+  // The segment's global descriptor before the lock: matches and inserts wait for each other
+  // only where they share the caches.
+  const std::vector<float> global = params_.database.shortlist > 0 && !exhaustive
+                                        ? model::globalDescriptor(model.descriptors)
+                                        : std::vector<float>();
   std::lock_guard lock(mutex_);
   const int k = params_.database.prefilter_neighbours;
   // The models voted over: every one (shortlist 0: the prefilter holds their descriptors), or
@@ -139,7 +144,7 @@ StatusOr<std::vector<int64_t>> ObjectDatabase::candidatesFor(const model::Object
         if (id != model.id) ids.push_back(id);
       }
     } else {
-      ids = shortlistFor(model::globalDescriptor(model.descriptors), model.id);
+      ids = shortlistFor(global, model.id);
       if (shortlist != nullptr) *shortlist = ids;
     }
     OBJDB_ASSIGN_OR_RETURN(const auto descriptors, cachedDescriptors(ids));
