@@ -176,14 +176,7 @@ grpc::ServerUnaryReactor* ObjectDatabaseService::ListObjects(grpc::CallbackServe
     OBJDB_ASSIGN_OR_RETURN(const int64_t after,
                            parsePageToken(request->page_token(), 'o', filter));
     if (!request->session_name().empty()) {
-      OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store_->sessions());
-      const bool known = std::any_of(stored.begin(), stored.end(), [&](const auto& s) {
-        return s.name == request->session_name();
-      });
-      if (!known) {
-        return absl::NotFoundError(
-            absl::StrFormat("no session named \"%s\"", request->session_name()));
-      }
+      OBJDB_RETURN_IF_ERROR(checkSessionStored(*store_, request->session_name()));
     }
     storage::ModelQuery query;
     query.after_id = after;

@@ -10,18 +10,15 @@
 #include "core/model/object_model.h"
 #include "server/object_database_service.h"
 #include "server/proto_convert.h"
+#include "server/service_util.h"
 
 namespace objdb::server {
 namespace {
 
-// NOT_FOUND naming `field` unless the store holds session `name`.
+// INVALID_ARGUMENT for an empty name, else NOT_FOUND naming `field` unless the store holds it.
 Status checkSession(const storage::Store& store, const std::string& name, const char* field) {
   if (name.empty()) return absl::InvalidArgumentError(absl::StrFormat("%s: empty", field));
-  OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store.sessions());
-  const bool known =
-      std::any_of(stored.begin(), stored.end(), [&](const auto& s) { return s.name == name; });
-  if (!known) return absl::NotFoundError(absl::StrFormat("%s: no session named \"%s\"", field, name));
-  return absl::OkStatus();
+  return checkSessionStored(store, name, field);
 }
 
 // Every active model placed in `session`, with its placements there (the store finds a session's

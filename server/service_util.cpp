@@ -62,4 +62,14 @@ Status shuttingDown() {
       "the server is shutting down: retry on another server, or once it has restarted");
 }
 
+Status checkSessionStored(const storage::Store& store, const std::string& name,
+                          const std::string& field) {
+  OBJDB_ASSIGN_OR_RETURN(const std::vector<storage::SessionInfo> stored, store.sessions());
+  for (const auto& s : stored) {
+    if (s.name == name) return absl::OkStatus();
+  }
+  return absl::NotFoundError(absl::StrFormat("%sno session named \"%s\"",
+                                             field.empty() ? "" : field + ": ", name));
+}
+
 }  // namespace objdb::server

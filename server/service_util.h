@@ -9,6 +9,7 @@
 
 #include "core/common/status.h"
 #include "server/status_convert.h"
+#include "storage/store.h"
 
 namespace objdb::server {
 
@@ -35,6 +36,10 @@ Status authorize(const grpc::CallbackServerContext* context, const std::string& 
 std::string pageToken(char kind, int64_t last_id, uint64_t filter);
 StatusOr<int64_t> parsePageToken(const std::string& token, char kind, uint64_t filter);
 uint32_t pageSize(uint32_t requested);
+// NOT_FOUND 'no session named "<name>"' (prefixed by "<field>: " when `field` is given) unless
+// the store holds session `name`.
+Status checkSessionStored(const storage::Store& store, const std::string& name,
+                          const std::string& field = "");
 // UNAVAILABLE for a call that came while the server drains.
 Status shuttingDown();
 
